@@ -1,0 +1,58 @@
+// Writers for everything flank hands to a person or a machine. Every file is written to a
+// temporary name in the same folder and renamed into place, so a failure never leaves a
+// half-written output (DESIGN "Command line").
+#pragma once
+
+#include <filesystem>
+#include <functional>
+#include <ostream>
+#include <string>
+#include <variant>
+#include <vector>
+
+#include "kernels/mesh.h"
+#include "solver/patch.h"
+
+namespace flank::io {
+
+// Writes through `fill` into PATH.tmp-XXXX, flushes, renames onto `path`. Throws io::Error
+// (and removes the temporary) if anything fails.
+void write_file_atomic(const std::filesystem::path& path,
+                       const std::function<void(std::ostream&)>& fill);
+
+using SettingValue = std::variant<double, long long, bool, std::string, std::vector<double>>;
+struct Setting {
+  std::string key;
+  SettingValue value;
+};
+
+struct RunInfo {
+  std::string input_path;
+  int vertices = 0;
+  int triangles = 0;
+  double bbox_diagonal = 0.0;
+  std::vector<Setting> settings;  // every option that shaped the result
+  double coverage_fraction = 0.0;
+  double tolerance = 0.0;
+  double uncovered_area = 0.0;
+  std::vector<std::pair<std::string, double>> timing_s;  // index, candidates, fit, cover, total
+};
+
+// patches.json, format flank-patches/1 (DESIGN "Output").
+void write_patches_json(const std::filesystem::path& path, const RunInfo& run,
+                        const std::vector<Patch>& patches);
+// envelopes.ply: every patch's Ω, binary little-endian, with per-vertex float `error`
+// (signed), uchar red/green/blue from a diverging map over ±tolerance, and int `patch`.
+void write_envelopes_ply(const std::filesystem::path& path, const std::vector<Patch>& patches,
+                         double tolerance);
+// design.ply: Φ with per-vertex int `patch` (−1 uncovered) and a colour per patch,
+// uncovered vertices in their own colour (magenta).
+void write_design_ply(const std::filesystem::path& path, const Mesh& mesh,
+                      const std::vector<int>& vertex_patch);
+// toolpath.apt: APT CL data, one block per patch: a comment header with the cutter (kind,
+// length, radii, meridian), CUTTER/ with the nominal diameter and length, MULTAX/ON, then
+// one GOTO/x,y,z,i,j,k per step (tip position, unit axis toward the spindle), FINI.
+void write_toolpath_apt(const std::filesystem::path& path, const std::vector<Patch>& patches,
+                        int steps_per_patch, const std::string& part_name);
+
+}  // namespace flank::io

@@ -1,0 +1,61 @@
+// Closest points on the design surface Φ (DESIGN "Closest points"): an Embree BVH queried
+// with rtcPointQuery and an exact point–triangle callback in double precision.
+#pragma once
+
+#include <memory>
+#include <span>
+#include <vector>
+
+#include "kernels/mesh.h"
+#include "kernels/types.h"
+
+namespace flank {
+
+struct ClosestPoint {
+  Vec3 point = Vec3::Zero();      // footpoint p⊥ on Φ
+  Vec3 direction = Vec3::Zero();  // g = (p − p⊥)/|p − p⊥|; the face normal when p lies on Φ
+  double distance = 0.0;          // |p − p⊥| ≥ 0
+  double signed_distance = 0.0;   // distance, negative when p is behind the footpoint face
+  int face = -1;                  // face of the footpoint, -1 if the query failed
+  // The footpoint lies on a boundary edge or vertex of Φ and p is beyond it (g is not the
+  // face normal): the query point has left the surface.
+  bool boundary = false;
+};
+
+class SurfaceIndex {
+ public:
+  // Builds the BVH over a copy of `mesh` (which must be valid: see io::read_mesh).
+  explicit SurfaceIndex(const Mesh& mesh);
+  ~SurfaceIndex();
+  SurfaceIndex(SurfaceIndex&&) noexcept;
+  SurfaceIndex& operator=(SurfaceIndex&&) noexcept;
+  SurfaceIndex(const SurfaceIndex&) = delete;
+  SurfaceIndex& operator=(const SurfaceIndex&) = delete;
+
+  const Mesh& mesh() const;
+  double diagonal() const;          // bounding-box diagonal of Φ
+  const Points& normals() const;    // #F by 3 unit face normals
+  bool is_boundary_vertex(int v) const;
+
+  // One query. `hint_face` (a previous footpoint's face, or -1) bounds the search radius
+  // by the exact distance to that face: the warm start for coherent queries.
+  ClosestPoint closest_point(const Vec3& p, int hint_face = -1) const;
+
+  // #Q queries in parallel; `hints` is empty or #Q faces (-1 for none). Deterministic.
+  std::vector<ClosestPoint> closest_points(PointsRef queries,
+                                           std::span<const int> hints = {}) const;
+  // Same into caller storage, on the calling thread only (for use inside parallel tasks).
+  void closest_points_serial(PointsRef queries, std::span<const int> hints,
+                             std::span<ClosestPoint> out) const;
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
+
+// Exact closest point on triangle (a, b, c) to p. `region` receives 0 for the interior,
+// 1..3 for edges ab, bc, ca, 4..6 for vertices a, b, c.
+Vec3 closest_point_on_triangle(const Vec3& p, const Vec3& a, const Vec3& b, const Vec3& c,
+                               int* region = nullptr);
+
+}  // namespace flank
