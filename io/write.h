@@ -38,6 +38,9 @@ struct RunInfo {
   std::vector<std::pair<std::string, double>> timing_s;  // index, candidates, fit, cover, total
 };
 
+// A plain triangle mesh, format by extension: .stl (binary), .obj, .ply (binary little-endian).
+void write_mesh(const std::filesystem::path& path, const Mesh& mesh);
+
 // patches.json, format flank-patches/1 (DESIGN "Output").
 void write_patches_json(const std::filesystem::path& path, const RunInfo& run,
                         const std::vector<Patch>& patches);
