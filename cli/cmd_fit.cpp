@@ -1,0 +1,204 @@
+// flank fit: one patch from a user's start — a single line (line-driven, paper §4.2–4.3) or
+// ordered lines (surface-driven, §4.4) — fitted, trimmed, evaluated and written out.
+#include <CLI/CLI.hpp>
+#include <cstdio>
+#include <filesystem>
+#include <optional>
+
+#include "cli/commands.h"
+#include "cli/common.h"
+#include "io/read_mesh.h"
+#include "io/write.h"
+#include "kernels/parallel.h"
+#include "solver/evaluate_patch.h"
+#include "solver/propagate.h"
+#include "solver/trim.h"
+
+namespace flank::cli {
+
+namespace {
+
+struct FitArgs {
+  std::string mesh, line, lines_file, out_dir, tool = "cone", holder;
+  std::optional<double> tolerance, tolerance_rel;
+  int threads = 0, control_points = 12, samples_t = 100, samples_s = 30, apt_steps = 200;
+  bool flip = false, quiet = false;
+};
+
+// Most axis samples behind Φ's faces means the normals point away from the tool.
+void check_side(const SurfaceIndex& index, const Motion& motion) {
+  int behind = 0, inside = 0;
+  for (int i = 0; i < 21; ++i) {
+    const ClosestPoint f = index.closest_point(motion.point(i / 20.0, 0.5));
+    if (f.boundary || f.face < 0) continue;
+    ++inside;
+    if (f.signed_distance < 0) ++behind;
+  }
+  if (inside > 0 && 2 * behind > inside)
+    throw UsageError(
+        "the cutter axis lies behind the surface (its normals point away from the tool); "
+        "pass --flip");
+}
+
+int run_fit(const FitArgs& a) {
+  Progress progress("fit", a.quiet);
+  CutterKind kind;
+  if (!parse_cutter_kind(a.tool, &kind))
+    throw UsageError("--tool must be cylinder, cone, barrel or spline, not '" + a.tool + "'");
+  if (a.line.empty() == a.lines_file.empty())
+    throw UsageError("give exactly one of --line and --lines");
+  std::optional<std::pair<double, double>> holder;
+  if (!a.holder.empty()) holder = parse_pair(a.holder, "--holder");
+  std::optional<Line> user_line;
+  if (!a.line.empty()) user_line = parse_line(a.line, "--line");
+  std::vector<Line> user_lines;
+  if (!a.lines_file.empty()) user_lines = read_lines_file(a.lines_file);
+
+  ThreadLimit limit(a.threads);
+  io::ReadOptions ro;
+  ro.flip = a.flip;
+  const io::LoadedMesh lm = io::read_mesh(a.mesh, ro);
+  progress.stage("read " + std::to_string(lm.mesh.vertex_count()) + " vertices, " +
+                 std::to_string(lm.mesh.face_count()) + " triangles");
+  const SurfaceIndex index(lm.mesh);
+  const double diagonal = index.diagonal();
+  const double tol = resolve_tolerance(a.tolerance, a.tolerance_rel, diagonal);
+  progress.stage("indexed; tolerance " + std::to_string(tol) + " mm");
+
+  Motion init;
+  std::vector<io::Setting> settings;
+  if (user_line) {
+    const RefinedLine refined = refine_line(index, *user_line);
+    progress.stage("line-driven start: best of " + std::to_string(refined.evaluated) +
+                   " nearby lines has movability " + std::to_string(refined.movability.value));
+    if (!refined.movability.ok())
+      throw UsageError("the line has no usable footpoints on the surface (it is off the part)");
+    const Propagation prop = propagate(index, refined.line);
+    progress.stage("propagated " + std::to_string(prop.rulings.size()) + " rulings (stops: " +
+                   to_string(prop.stop_backward) + " / " + to_string(prop.stop_forward) + ")");
+    if (prop.rulings.size() < 4)
+      throw UsageError("the line cannot move along the surface: try another line or --lines");
+    init = Motion::fit(prop.rulings, a.control_points);
+    const Line& l = *user_line;
+    settings.push_back({"start", std::string("line")});
+    settings.push_back({"line", std::vector<double>{l.a.x(), l.a.y(), l.a.z(), l.b.x(), l.b.y(), l.b.z()}});
+  } else {
+    init = motion_from_lines(user_lines, a.control_points);
+    settings.push_back({"start", std::string("lines")});
+    settings.push_back({"lines_file", a.lines_file});
+    settings.push_back({"lines", static_cast<long long>(user_lines.size())});
+  }
+  check_side(index, init);
+
+  FitPatchOptions fo;
+  fo.fit.kind = kind;
+  fo.fit.control_points = a.control_points;
+  fo.fit.samples_t = a.samples_t;
+  fo.fit.samples_s = a.samples_s;
+  fo.tolerance = tol;
+  if (std::string e = fo.validate(); !e.empty()) throw UsageError(e);
+  const FitPatchResult fit = fit_and_trim(index, init, fo);
+  progress.stage("fit: " + fit.fit.brief_report() + ", " + std::to_string(fit.rounds) + " trims");
+  if (fit.status != FitPatchStatus::ok) {
+    std::fprintf(stderr, "flank fit: %s: no patch (%s)\n", a.mesh.c_str(), fit.message.c_str());
+    return 1;
+  }
+
+  EvaluateOptions eo;
+  eo.tolerance = tol;
+  eo.rows = std::max(200, 2 * a.samples_t);
+  eo.cols = std::max(60, 2 * a.samples_s);
+  if (holder) eo.holder = true, eo.holder_length = holder->first, eo.holder_radius = holder->second;
+  Patch patch = evaluate_patch(index, fit.fit.motion, fit.fit.cutter, eo);
+  patch.id = 0;
+  progress.stage("evaluated: max |e| " + std::to_string(patch.error.max) + " mm, coverage " +
+                 std::to_string(100.0 * patch.coverage_fraction) + "%");
+
+  io::RunInfo run;
+  run.input_path = a.mesh;
+  run.vertices = lm.mesh.vertex_count();
+  run.triangles = lm.mesh.face_count();
+  run.bbox_diagonal = diagonal;
+  settings.insert(settings.begin(), {"command", std::string("fit")});
+  settings.push_back({"tolerance", tol});
+  settings.push_back({"tool", a.tool});
+  settings.push_back({"control_points", static_cast<long long>(a.control_points)});
+  settings.push_back({"samples", std::vector<double>{double(a.samples_t), double(a.samples_s)}});
+  settings.push_back({"weights", std::vector<double>{fo.fit.weight_plane, fo.fit.weight_fair,
+                                                     fo.fit.weight_point, fo.fit.weight_rigid}});
+  if (holder) settings.push_back({"holder", std::vector<double>{holder->first, holder->second}});
+  settings.push_back({"flip", a.flip});
+  run.settings = settings;
+  run.tolerance = tol;
+  run.coverage_fraction = patch.coverage_fraction;
+  run.uncovered_area = total_area(lm.mesh) - patch.covered_area;
+  run.timing_s = {{"index", 0.0}, {"fit", fit.fit.timing.total_s}, {"total", progress.elapsed()}};
+
+  std::error_code ec;
+  std::filesystem::create_directories(a.out_dir, ec);
+  if (ec) throw io::Error(a.out_dir + ": cannot create output folder: " + ec.message());
+  const std::filesystem::path dir(a.out_dir);
+  std::vector<Patch> patches{std::move(patch)};
+  std::vector<int> vertex_patch(static_cast<std::size_t>(lm.mesh.vertex_count()), -1);
+  for (int v : patches[0].covered_vertices) vertex_patch[static_cast<std::size_t>(v)] = 0;
+  io::write_patches_json(dir / "patches.json", run, patches);
+  io::write_envelopes_ply(dir / "envelopes.ply", patches, tol);
+  io::write_design_ply(dir / "design.ply", lm.mesh, vertex_patch);
+  io::write_toolpath_apt(dir / "toolpath.apt", patches, a.apt_steps,
+                         std::filesystem::path(a.mesh).stem().string());
+  const Patch& p = patches[0];
+  std::printf("patch 0: %s cutter, length %.4f mm, sphere radii %.4f..%.4f mm\n",
+              std::string(to_string(p.cutter.kind)).c_str(), p.cutter.length, p.cutter.radius(0),
+              p.cutter.radius(1));
+  std::printf("  error max %.3e mm (%.2e x diagonal), rms %.3e mm, max gouge %.3e mm\n",
+              p.error.max, p.error.max_relative, p.error.rms, p.error.max_gouge);
+  std::printf("  covers %.2f%% of the surface (%.4g mm^2) within %.3g mm\n",
+              100.0 * p.coverage_fraction, p.covered_area, tol);
+  if (p.collision.checked)
+    std::printf("  holder %s (min clearance %.4g mm)\n", p.collision.holder_clear ? "clear" : "COLLIDES",
+                p.collision.min_clearance);
+  std::printf("results in %s: patches.json envelopes.ply design.ply toolpath.apt\n", a.out_dir.c_str());
+  return 0;
+}
+
+}  // namespace
+
+void register_fit(CLI::App& app, int* exit_code) {
+  auto* cmd = app.add_subcommand(
+      "fit", "Fit one flank-millable patch from a start you give: one line or ordered lines");
+  auto a = std::make_shared<FitArgs>();
+  cmd->add_option("MESH", a->mesh, "Design surface: STL, OBJ or PLY")->required();
+  cmd->add_option("--line", a->line,
+                  "Line-driven start: a cutter axis x0,y0,z0,x1,y1,z1 in mm, tip first; flank "
+                  "improves it locally and sweeps it both ways");
+  cmd->add_option("--lines", a->lines_file,
+                  "Surface-driven start: a text file, one axis per row 'x0 y0 z0 x1 y1 z1', in "
+                  "the order the cutter should pass them");
+  cmd->add_option("-o,--output", a->out_dir, "Folder for patches.json, envelopes.ply, design.ply, toolpath.apt")
+      ->required();
+  cmd->add_option("--tolerance", a->tolerance, "Allowed error in mm");
+  cmd->add_option("--tolerance-rel", a->tolerance_rel,
+                  "Allowed error as a fraction of the bounding-box diagonal (default 1e-4)");
+  cmd->add_option("--tool", a->tool, "Cutter shape: cylinder, cone, barrel or spline (default cone)");
+  cmd->add_option("--holder", a->holder,
+                  "Check the holder: LEN,RADIUS of a cylinder beyond the cutter's spindle end, in mm");
+  cmd->add_option("--threads", a->threads, "Worker threads (default: all cores)")->check(CLI::Range(1, 1024));
+  cmd->add_option("--control-points", a->control_points, "B-spline control points per axis end curve (default 12)")
+      ->check(CLI::Range(4, 200));
+  cmd->add_option("--samples-t", a->samples_t, "Samples along the motion (default 100)")->check(CLI::Range(8, 100000));
+  cmd->add_option("--samples-s", a->samples_s, "Samples along the axis (default 30)")->check(CLI::Range(4, 10000));
+  cmd->add_option("--apt-steps", a->apt_steps, "GOTO steps per patch in toolpath.apt (default 200)")
+      ->check(CLI::Range(2, 1000000));
+  cmd->add_flag("--flip", a->flip, "Reverse the surface orientation (tools live on the normals' side)");
+  cmd->add_flag("-q,--quiet", a->quiet, "No progress lines on stderr");
+  cmd->callback([=]() {
+    try {
+      *exit_code = run_fit(*a);
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "flank fit: %s\n", e.what());
+      *exit_code = 2;
+    }
+  });
+}
+
+}  // namespace flank::cli

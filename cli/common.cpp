@@ -1,0 +1,94 @@
+#include "cli/common.h"
+
+#include <cmath>
+#include <cstdio>
+#include <fstream>
+#include <sstream>
+
+namespace flank::cli {
+
+namespace {
+std::vector<double> parse_numbers(std::string text, const std::string& option) {
+  for (char& c : text)
+    if (c == ',') c = ' ';
+  std::istringstream in(text);
+  std::vector<double> out;
+  std::string token;
+  while (in >> token) {
+    std::size_t used = 0;
+    double v = 0;
+    try {
+      v = std::stod(token, &used);
+    } catch (const std::exception&) {
+      used = 0;
+    }
+    if (used != token.size() || !std::isfinite(v))
+      throw UsageError(option + ": '" + token + "' is not a finite number");
+    out.push_back(v);
+  }
+  return out;
+}
+}  // namespace
+
+Line parse_line(const std::string& text, const std::string& option) {
+  const std::vector<double> v = parse_numbers(text, option);
+  if (v.size() != 6) throw UsageError(option + " takes six numbers x0,y0,z0,x1,y1,z1");
+  Line l{Vec3(v[0], v[1], v[2]), Vec3(v[3], v[4], v[5])};
+  if (!(l.length() > 0)) throw UsageError(option + ": the two endpoints coincide");
+  return l;
+}
+
+std::pair<double, double> parse_pair(const std::string& text, const std::string& option) {
+  const std::vector<double> v = parse_numbers(text, option);
+  if (v.size() != 2) throw UsageError(option + " takes two numbers A,B");
+  if (!(v[0] > 0 && v[1] > 0)) throw UsageError(option + ": both values must be positive");
+  return {v[0], v[1]};
+}
+
+std::vector<Line> read_lines_file(const std::string& path) {
+  std::ifstream in(path);
+  if (!in) throw io::Error(path + ": cannot open lines file");
+  std::vector<Line> lines;
+  std::string row;
+  int number = 0;
+  while (std::getline(in, row)) {
+    ++number;
+    if (const auto hash = row.find('#'); hash != std::string::npos) row.resize(hash);
+    if (row.find_first_not_of(" \t\r,") == std::string::npos) continue;
+    try {
+      lines.push_back(parse_line(row, "line " + std::to_string(number)));
+    } catch (const UsageError& e) {
+      throw io::Error(path + ": " + e.what());
+    }
+  }
+  if (lines.size() < 2) throw io::Error(path + ": needs at least two lines, in motion order");
+  return lines;
+}
+
+Progress::Progress(std::string command, bool quiet)
+    : command_(std::move(command)), quiet_(quiet), start_(std::chrono::steady_clock::now()) {}
+
+double Progress::elapsed() const {
+  return std::chrono::duration<double>(std::chrono::steady_clock::now() - start_).count();
+}
+
+void Progress::stage(const std::string& what) {
+  if (quiet_) return;
+  std::fprintf(stderr, "[%6.2fs] flank %s: %s\n", elapsed(), command_.c_str(), what.c_str());
+  std::fflush(stderr);
+}
+
+double resolve_tolerance(std::optional<double> absolute, std::optional<double> relative,
+                         double diagonal) {
+  if (absolute && relative) throw UsageError("give --tolerance or --tolerance-rel, not both");
+  if (absolute) {
+    if (!(*absolute > 0) || !std::isfinite(*absolute))
+      throw UsageError("--tolerance must be a positive length");
+    return *absolute;
+  }
+  const double r = relative ? *relative : 1e-4;
+  if (!(r > 0) || !(r < 1)) throw UsageError("--tolerance-rel must be in (0, 1)");
+  return r * diagonal;
+}
+
+}  // namespace flank::cli

@@ -1,0 +1,47 @@
+// Shared pieces of the flank subcommands: option parsing helpers, mesh loading with one-line
+// errors, progress lines on stderr.
+#pragma once
+
+#include <chrono>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "io/read_mesh.h"
+#include "solver/motion.h"
+
+namespace flank::cli {
+
+// An impossible option or unusable value: the CLI prints "flank CMD: message" and exits 2.
+class UsageError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+// "x0,y0,z0,x1,y1,z1" → Line; throws UsageError naming the option.
+Line parse_line(const std::string& text, const std::string& option);
+// "A,B" → two positive numbers.
+std::pair<double, double> parse_pair(const std::string& text, const std::string& option);
+// One line per row "x0 y0 z0 x1 y1 z1" (commas also accepted, '#' comments); io::Error on
+// unreadable or malformed files.
+std::vector<Line> read_lines_file(const std::string& path);
+
+// Progress on stderr: each stage line carries the elapsed time; silent with --quiet.
+class Progress {
+ public:
+  Progress(std::string command, bool quiet);
+  void stage(const std::string& what);
+  double elapsed() const;
+
+ private:
+  std::string command_;
+  bool quiet_;
+  std::chrono::steady_clock::time_point start_;
+};
+
+// Resolves --tolerance / --tolerance-rel against the diagonal (default 1e-4 × diagonal).
+double resolve_tolerance(std::optional<double> absolute, std::optional<double> relative,
+                         double diagonal);
+
+}  // namespace flank::cli

@@ -1,0 +1,106 @@
+#include "kernels/movability.h"
+
+#include <Eigen/Eigenvalues>
+#include <cmath>
+#include <vector>
+
+namespace flank {
+
+double movability_sample(int i, int n) { return (i + 0.5) / n; }
+
+Movability movability_from_directions(const Vec3& a, const Vec3& b, std::span<const double> s,
+                                      PointsRef g, std::span<const double> weights) {
+  Movability out;
+  out.samples = static_cast<int>(s.size());
+  const Vec3 ab = b - a;
+  const double L = ab.norm();
+  if (!(L > 0.0) || s.size() < 3) return out;
+  out.u = ab / L;
+  // Any orthonormal frame normal to u: the velocity field in world space does not depend on it.
+  out.n1 = out.u.unitOrthogonal();
+  out.n2 = out.u.cross(out.n1);
+
+  // A = (1/Σw) Σ w_i k_i k_iᵀ with r_i = ⟨g_i, v(s_i)⟩ = k_iᵀ x (eq. 5).
+  Eigen::Matrix<double, 5, 5> A = Eigen::Matrix<double, 5, 5>::Zero();
+  double wsum = 0.0;
+  for (std::size_t i = 0; i < s.size(); ++i) {
+    const double w = weights.empty() ? 1.0 : weights[i];
+    if (w <= 0.0) continue;
+    const Vec3 gi = g.row(static_cast<Eigen::Index>(i)).transpose();
+    const double g1 = gi.dot(out.n1), g2 = gi.dot(out.n2), gu = gi.dot(out.u);
+    const double h = s[i] - 0.5;
+    Eigen::Matrix<double, 5, 1> k;
+    k << g1, g2, gu, h * g1, h * g2;
+    A.noalias() += w * k * k.transpose();
+    wsum += w;
+  }
+  if (wsum < 3.0) return out;
+  A /= wsum;
+
+  // Eliminate y = (α, λ1, λ2): S = A_μμ − A_μy A_yy⁺ A_yμ, the pseudo-inverse because α is
+  // unconstrained on cylinder-like lines (g ⟂ u everywhere).
+  const Eigen::Matrix2d Amm = A.topLeftCorner<2, 2>();
+  const Eigen::Matrix<double, 2, 3> Amy = A.topRightCorner<2, 3>();
+  const Eigen::Matrix3d Ayy = A.bottomRightCorner<3, 3>();
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> ey(Ayy);
+  const double cutoff = 1e-12 * std::max(1.0, A.diagonal().maxCoeff());
+  Eigen::Matrix3d Ayy_pinv = Eigen::Matrix3d::Zero();
+  for (int k = 0; k < 3; ++k) {
+    const double lam = ey.eigenvalues()(k);
+    if (lam > cutoff)
+      Ayy_pinv += (1.0 / lam) * ey.eigenvectors().col(k) * ey.eigenvectors().col(k).transpose();
+  }
+  Eigen::Matrix2d S = Amm - Amy * Ayy_pinv * Amy.transpose();
+  S = 0.5 * (S + S.transpose());
+  Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> es(S);
+  const Eigen::Vector2d mu = es.eigenvectors().col(0);
+  const Eigen::Vector3d y = -Ayy_pinv * Amy.transpose() * mu;
+  out.value = std::max(0.0, es.eigenvalues()(0));
+  out.mu1 = mu(0), out.mu2 = mu(1);
+  out.alpha = y(0), out.lambda1 = y(1), out.lambda2 = y(2);
+  out.status = MovabilityStatus::ok;
+  return out;
+}
+
+Movability movability(const SurfaceIndex& index, const Vec3& a, const Vec3& b,
+                      const MovabilityOptions& options, std::span<int> hints) {
+  const int n = options.samples;
+  Points q(n, 3);
+  std::vector<double> s(static_cast<std::size_t>(n));
+  for (int i = 0; i < n; ++i) {
+    s[i] = movability_sample(i, n);
+    q.row(i) = ((1.0 - s[i]) * a + s[i] * b).transpose();
+  }
+  std::vector<ClosestPoint> cp(static_cast<std::size_t>(n));
+  std::vector<int> local_hints;
+  std::span<const int> hint_view;
+  if (static_cast<int>(hints.size()) == n) hint_view = hints;
+  index.closest_points_serial(q, hint_view, cp);
+
+  Points g(n, 3);
+  std::vector<double> w(static_cast<std::size_t>(n), 1.0);
+  int boundary = 0;
+  bool jump = false;
+  const double step = (b - a).norm() / n;
+  for (int i = 0; i < n; ++i) {
+    g.row(i) = cp[i].direction.transpose();
+    if (cp[i].boundary || cp[i].face < 0) {
+      w[i] = 0.0;
+      ++boundary;
+    }
+    if (i > 0 && (cp[i].point - cp[i - 1].point).norm() > options.jump_factor * step + 1e-12)
+      jump = true;
+    if (static_cast<int>(hints.size()) == n) hints[i] = cp[i].face;
+  }
+  Movability out = movability_from_directions(a, b, s, g, w);
+  out.boundary_samples = boundary;
+  if (out.status == MovabilityStatus::ok) {
+    if (boundary > options.max_boundary_fraction * n)
+      out.status = MovabilityStatus::left_surface;
+    else if (jump)
+      out.status = MovabilityStatus::jump;
+  }
+  return out;
+}
+
+}  // namespace flank

@@ -1,0 +1,173 @@
+#include "solver/propagate.h"
+
+#include <cmath>
+#include <numbers>
+
+#include "kernels/bspline.h"
+#include "kernels/parallel.h"
+
+namespace flank {
+
+const char* to_string(PropagateStop stop) {
+  switch (stop) {
+    case PropagateStop::max_movability: return "movability above threshold";
+    case PropagateStop::left_surface: return "left the surface";
+    case PropagateStop::jump: return "footpoints jump";
+    case PropagateStop::max_travel: return "travel cap";
+    case PropagateStop::degenerate: return "degenerate";
+  }
+  return "unknown";
+}
+
+namespace {
+// Point k of n in the unit disc, sunflower (Vogel) pattern: even cover, no RNG.
+Vec2 sunflower(int k, int n) {
+  if (k == 0) return Vec2::Zero();
+  const double golden = std::numbers::pi * (3.0 - std::sqrt(5.0));
+  const double r = std::sqrt((k + 0.5) / n);
+  return Vec2(r * std::cos(k * golden), r * std::sin(k * golden));
+}
+}  // namespace
+
+RefinedLine refine_line(const SurfaceIndex& index, const Line& start,
+                        const RefineLineOptions& options) {
+  RefinedLine best;
+  best.line = start;
+  best.movability = movability(index, start.a, start.b, options.movability);
+  best.evaluated = 1;
+  const double L = start.length();
+  double radius = options.radius > 0 ? options.radius : 0.05 * L;
+  const int c = options.candidates_per_end;
+  for (int round = 0; round < options.rounds; ++round) {
+    const Vec3 u = (best.line.b - best.line.a).normalized();
+    const Vec3 n1 = u.unitOrthogonal(), n2 = u.cross(n1);
+    std::vector<Movability> scores(static_cast<std::size_t>(c * c));
+    std::vector<Line> lines(scores.size());
+    for (int i = 0; i < c; ++i)
+      for (int j = 0; j < c; ++j) {
+        const Vec2 pa = radius * sunflower(i, c), pb = radius * sunflower(j, c);
+        Line l{best.line.a + pa.x() * n1 + pa.y() * n2, best.line.b + pb.x() * n1 + pb.y() * n2};
+        // Keep the length: a rigid cutter.
+        const Vec3 mid = 0.5 * (l.a + l.b), dir = (l.b - l.a).normalized();
+        lines[static_cast<std::size_t>(i * c + j)] = {mid - 0.5 * L * dir, mid + 0.5 * L * dir};
+      }
+    parallel_for(0, lines.size(), [&](std::size_t b, std::size_t e) {
+      for (std::size_t k = b; k < e; ++k)
+        scores[k] = movability(index, lines[k].a, lines[k].b, options.movability);
+    }, 8);
+    best.evaluated += static_cast<int>(lines.size());
+    for (std::size_t k = 0; k < lines.size(); ++k)  // serial: ties go to the lower index
+      if (scores[k].ok() && (!best.movability.ok() || scores[k].value < best.movability.value)) {
+        best.movability = scores[k];
+        best.line = lines[k];
+      }
+    radius *= 0.5;
+  }
+  return best;
+}
+
+namespace {
+struct Stepper {
+  const SurfaceIndex& index;
+  const PropagateOptions& options;
+  std::vector<int> hints;
+  double L;
+
+  // Velocities of the ends for line l with the sweep sign aligned to `reference`.
+  bool velocity(const Line& l, const Vec3& reference, Vec3* va, Vec3* vb, Movability* mv) {
+    *mv = movability(index, l.a, l.b, options.movability, hints);
+    if (!std::isfinite(mv->value)) return false;
+    Vec3 vm = mv->velocity(0.5);
+    double sign = reference.squaredNorm() > 0 && vm.dot(reference) < 0 ? -1.0 : 1.0;
+    *va = sign * mv->velocity(0.0);
+    *vb = sign * mv->velocity(1.0);
+    return true;
+  }
+
+  Line rigid(const Line& l) const {
+    const Vec3 mid = 0.5 * (l.a + l.b), dir = (l.b - l.a).normalized();
+    return {mid - 0.5 * L * dir, mid + 0.5 * L * dir};
+  }
+};
+
+PropagateStop run(Stepper& st, const Line& start, const Vec3& initial_dir, double h,
+                  double max_travel, std::vector<Line>* out, double* worst) {
+  Line cur = start;
+  Vec3 ref = initial_dir;
+  double travel = 0.0;
+  for (;;) {
+    if (travel >= max_travel) return PropagateStop::max_travel;
+    Vec3 va, vb;
+    Movability mv;
+    if (!st.velocity(cur, ref, &va, &vb, &mv)) return PropagateStop::degenerate;
+    if (mv.status == MovabilityStatus::left_surface) return PropagateStop::left_surface;
+    if (mv.status == MovabilityStatus::jump) return PropagateStop::jump;
+    if (mv.value > st.options.max_movability) return PropagateStop::max_movability;
+    *worst = std::max(*worst, mv.value);
+    // RK2 (midpoint rule); the speed of the midpoint across the axis is 1, so h is a length.
+    const Vec3 vm1 = 0.5 * (va + vb);
+    const Line half = st.rigid({cur.a + 0.5 * h * va, cur.b + 0.5 * h * vb});
+    Vec3 va2, vb2;
+    Movability mv2;
+    if (!st.velocity(half, vm1, &va2, &vb2, &mv2) || !mv2.ok()) return PropagateStop::left_surface;
+    const Line next = st.rigid({cur.a + h * va2, cur.b + h * vb2});
+    ref = 0.5 * (va2 + vb2);
+    travel += (0.5 * (next.a + next.b) - 0.5 * (cur.a + cur.b)).norm();
+    out->push_back(next);
+    cur = next;
+  }
+}
+}  // namespace
+
+Propagation propagate(const SurfaceIndex& index, const Line& start,
+                      const PropagateOptions& options) {
+  Propagation p;
+  const double h = options.step > 0 ? options.step : 1e-3 * index.diagonal();
+  const double cap = options.max_travel > 0 ? options.max_travel : 4.0 * index.diagonal();
+  Stepper st{index, options, std::vector<int>(static_cast<std::size_t>(options.movability.samples), -1),
+             start.length()};
+  Movability m0 = movability(index, start.a, start.b, options.movability, st.hints);
+  p.max_movability = m0.value;
+  if (!m0.ok()) {
+    p.rulings = {start};
+    return p;
+  }
+  const Vec3 dir = m0.velocity(0.5);
+  std::vector<Line> forward, backward;
+  p.stop_forward = run(st, start, dir, h, cap, &forward, &p.max_movability);
+  std::fill(st.hints.begin(), st.hints.end(), -1);
+  p.stop_backward = run(st, start, -dir, h, cap, &backward, &p.max_movability);
+  p.rulings.assign(backward.rbegin(), backward.rend());
+  p.start_index = static_cast<int>(p.rulings.size());
+  p.rulings.push_back(start);
+  p.rulings.insert(p.rulings.end(), forward.begin(), forward.end());
+  return p;
+}
+
+Motion motion_from_lines(const std::vector<Line>& lines, int control_points) {
+  // The endpoints are the control polygons (§4.4) of cubic B-splines with as many control
+  // points as lines; two or three lines are first spread evenly along their polyline.
+  std::vector<Line> poly = lines;
+  if (poly.size() < kSplineDegree + 1) {
+    std::vector<Line> spread(kSplineDegree + 1);
+    for (int i = 0; i <= kSplineDegree; ++i) {
+      const double x = static_cast<double>(i) / kSplineDegree * (lines.size() - 1);
+      const std::size_t k = std::min(static_cast<std::size_t>(x), lines.size() - 2);
+      const double f = x - static_cast<double>(k);
+      spread[i] = {(1 - f) * lines[k].a + f * lines[k + 1].a, (1 - f) * lines[k].b + f * lines[k + 1].b};
+    }
+    poly = spread;
+  }
+  Motion m;
+  m.knots = clamped_uniform_knots(static_cast<int>(poly.size()));
+  m.a.resize(static_cast<Eigen::Index>(poly.size()), 3);
+  m.b.resize(m.a.rows(), 3);
+  for (std::size_t i = 0; i < poly.size(); ++i) {
+    m.a.row(static_cast<Eigen::Index>(i)) = poly[i].a.transpose();
+    m.b.row(static_cast<Eigen::Index>(i)) = poly[i].b.transpose();
+  }
+  if (control_points <= 0 || control_points == m.count()) return m;
+  return m.restricted(0, 1, 0, 1, control_points);
+}
+
+}  // namespace flank

@@ -1,0 +1,58 @@
+// Initial ruled surfaces (paper §4.2–4.4): refine a user's line by local search of its
+// endpoints' neighbourhoods (Fig. 8), propagate it as-tangentially-as-possible both ways
+// (§4.3), or take a user's ordered lines as control polygons (§4.4).
+#pragma once
+
+#include <string>
+#include <vector>
+
+#include "kernels/movability.h"
+#include "solver/motion.h"
+
+namespace flank {
+
+struct RefineLineOptions {
+  MovabilityOptions movability;
+  int candidates_per_end = 15;  // 15 × 15 endpoint pairs per round, as Fig. 8
+  double radius = 0.0;          // search radius in the normal planes; 0: 5% of the line length
+  int rounds = 4;               // each round searches around the best so far, radius halved
+};
+
+struct RefinedLine {
+  Line line;
+  Movability movability;
+  int evaluated = 0;
+};
+
+// Deterministic (sunflower pattern in the discs, no RNG). Candidates are scored in parallel.
+RefinedLine refine_line(const SurfaceIndex& index, const Line& start,
+                        const RefineLineOptions& options = {});
+
+struct PropagateOptions {
+  MovabilityOptions movability;
+  double step = 0.0;              // midpoint step; 0: 1e-3 × bbox diagonal (DESIGN)
+  double max_movability = 1e-3;   // ε_move: stop when F_l exceeds it
+  double max_travel = 0.0;        // midpoint path cap each way; 0: 4 × bbox diagonal
+};
+
+enum class PropagateStop { max_movability, left_surface, jump, max_travel, degenerate };
+const char* to_string(PropagateStop stop);
+
+struct Propagation {
+  std::vector<Line> rulings;  // in motion order, the start line among them
+  int start_index = 0;
+  PropagateStop stop_backward = PropagateStop::degenerate;
+  PropagateStop stop_forward = PropagateStop::degenerate;
+  double max_movability = 0.0;  // worst F_l along the kept rulings
+};
+
+// RK2 integration of (ȧ, ḃ) = (v(0), v(1)) with |b − a| = L kept and the sweep direction
+// kept continuous, both ways from `start`, on the calling thread.
+Propagation propagate(const SurfaceIndex& index, const Line& start,
+                      const PropagateOptions& options = {});
+
+// Surface-driven start (§4.4): the endpoints of ordered lines are the control polygons of
+// a(t) and b(t); the result is resampled to `control_points` per curve.
+Motion motion_from_lines(const std::vector<Line>& lines, int control_points);
+
+}  // namespace flank
