@@ -68,7 +68,9 @@ int run_fit(const FitArgs& a) {
   Motion init;
   std::vector<io::Setting> settings;
   if (user_line) {
-    const RefinedLine refined = refine_line(index, *user_line);
+    RefineLineOptions rlo;
+    rlo.kind = kind;
+    const RefinedLine refined = refine_line(index, *user_line, rlo);
     progress.stage("line-driven start: best of " + std::to_string(refined.evaluated) +
                    " nearby lines has movability " + std::to_string(refined.movability.value));
     if (!refined.movability.ok())

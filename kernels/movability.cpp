@@ -43,7 +43,9 @@ Movability movability_from_directions(const Vec3& a, const Vec3& b, std::span<co
   const Eigen::Matrix<double, 2, 3> Amy = A.topRightCorner<2, 3>();
   const Eigen::Matrix3d Ayy = A.bottomRightCorner<3, 3>();
   Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> ey(Ayy);
-  const double cutoff = 1e-12 * std::max(1.0, A.diagonal().maxCoeff());
+  // Directions of y that the footpoints barely see (sliding along a cylinder-like line,
+  // where g·u is mesh noise) are treated as free and set to zero rather than amplified.
+  const double cutoff = 1e-4 * std::max(1e-300, A.trace());
   Eigen::Matrix3d Ayy_pinv = Eigen::Matrix3d::Zero();
   for (int k = 0; k < 3; ++k) {
     const double lam = ey.eigenvalues()(k);
@@ -94,6 +96,26 @@ Movability movability(const SurfaceIndex& index, const Vec3& a, const Vec3& b,
   }
   Movability out = movability_from_directions(a, b, s, g, w);
   out.boundary_samples = boundary;
+  if (options.profile && out.status == MovabilityStatus::ok) {
+    std::vector<double> ss, dd;
+    for (int i = 0; i < n; ++i)
+      if (w[i] > 0) ss.push_back(s[i]), dd.push_back(cp[i].distance);
+    out.cutter = Cutter::fit(*options.profile, (b - a).norm(), ss, dd);
+    double sq = 0.0;
+    out.radius_min = std::numeric_limits<double>::infinity();
+    out.radius_max = -out.radius_min;
+    for (std::size_t k = 0; k < ss.size(); ++k) {
+      const double r = out.cutter.radius(ss[k]) - dd[k];
+      sq += r * r;
+    }
+    for (int k = 0; k <= 20; ++k) {
+      const double sk = k / 20.0;
+      out.radius_min = std::min(out.radius_min, out.cutter.radius(sk));
+      out.radius_max = std::max(out.radius_max, out.cutter.radius(sk));
+      out.max_slope = std::max(out.max_slope, std::abs(out.cutter.slope(sk)));
+    }
+    out.profile_rms = ss.empty() ? 0.0 : std::sqrt(sq / static_cast<double>(ss.size()));
+  }
   if (out.status == MovabilityStatus::ok) {
     if (boundary > options.max_boundary_fraction * n)
       out.status = MovabilityStatus::left_surface;

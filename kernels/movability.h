@@ -4,7 +4,10 @@
 #pragma once
 
 #include <limits>
+#include <optional>
 #include <span>
+
+#include "kernels/cutter.h"
 
 #include "kernels/surface_index.h"
 #include "kernels/types.h"
@@ -22,6 +25,9 @@ struct MovabilityOptions {
   int samples = 30;                    // n
   double max_boundary_fraction = 0.34; // more boundary footpoints than this: left_surface
   double jump_factor = 4.0;            // footpoint step > factor × sample step: jump
+  // Also fit the footpoint distances with a cutter of this kind (the sphere radii the line
+  // would need), reporting the misfit and the profile.
+  std::optional<CutterKind> profile;
 };
 
 struct Movability {
@@ -32,6 +38,11 @@ struct Movability {
   Vec3 u = Vec3::Zero(), n1 = Vec3::Zero(), n2 = Vec3::Zero();
   int boundary_samples = 0;
   int samples = 0;
+  // With options.profile: least-squares sphere radii d(s) = P(s) c over the footpoint
+  // distances, their rms misfit, and the range of d and of |d′|.
+  Cutter cutter;
+  double profile_rms = 0.0;
+  double radius_min = 0.0, radius_max = 0.0, max_slope = 0.0;
 
   bool ok() const { return status == MovabilityStatus::ok; }
   // v(s) = v_m + (s − ½)(λ1 n1 + λ2 n2), v_m = α u + μ1 n1 + μ2 n2.

@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <chrono>
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <sstream>
 #include <vector>
 
@@ -20,6 +22,7 @@ std::string FitOptions::validate() const {
     return "fit weights must not be negative";
   if (weight_plane + weight_point <= 0) return "one of the proximity weights must be positive";
   if (max_iterations < 1) return "fit needs at least one iteration";
+  if (fair_iterations < 0) return "fair_iterations must not be negative";
   if (length < 0 || scale < 0) return "length and scale must not be negative";
   return {};
 }
@@ -70,6 +73,7 @@ struct Problem {
   double L = 0.0;
   double W1 = 0, W2 = 0, W3 = 0, W4 = 0;
   MatX H_fair;  // constant: W2 DᵀD
+  bool fair_active = true;
 
   int m() const { return options.samples_t; }
   int n() const { return options.samples_s; }
@@ -148,14 +152,18 @@ Evaluation evaluate(Problem& pb, const VecX& x, std::vector<int>& hints, FitTimi
         const double rho = nn.dot(p - f.point) - d(j);
         const Vec3 qv = p - f.point - d(j) * nn;
         rb.cost += pb.W1 * rho * rho + pb.W3 * qv.squaredNorm();
-        const Eigen::Matrix3d M = pb.W1 * nn * nn.transpose() + pb.W3 * Eigen::Matrix3d::Identity();
+        // At a true footpoint p − p⊥ = dist·n, so q = (dist − d)·n and its exact derivative is
+        // n nᵀ up to a term that vanishes with the residual. The frozen-footpoint model (I)
+        // would pin the samples tangentially, like point-to-point ICP, and crawl along the
+        // near-degenerate valleys (radius ↔ offset, reparametrisation) of the problem.
+        const Eigen::Matrix3d M = (pb.W1 + pb.W3) * nn * nn.transpose();
         const double sa = 1.0 - pb.s[j], sb = pb.s[j];
         rb.Maa += sa * sa * M, rb.Mab += sa * sb * M, rb.Mbb += sb * sb * M;
         const auto Pj = pb.P.row(j);
         const MatX Hpc = -(pb.W1 + pb.W3) * nn * Pj;
         rb.Ca += sa * Hpc, rb.Cb += sb * Hpc;
         rb.Hcc += (pb.W1 + pb.W3) * Pj.transpose() * Pj;
-        const Vec3 gp = pb.W1 * rho * nn + pb.W3 * qv;
+        const Vec3 gp = (pb.W1 * rho + pb.W3 * nn.dot(qv)) * nn;
         rb.ga += sa * gp, rb.gb += sb * gp;
         rb.gc -= (pb.W1 * rho + pb.W3 * nn.dot(qv)) * Pj.transpose();
       }
@@ -171,9 +179,9 @@ Evaluation evaluate(Problem& pb, const VecX& x, std::vector<int>& hints, FitTimi
 
   Evaluation ev;
   const int N = lay.n();
-  ev.H = pb.H_fair;
-  ev.g = pb.H_fair * x;
-  ev.cost = x.dot(ev.g);  // W2 |D x|²
+  // Fairness acts on the update δ (W2 |D δ|², see FitOptions): it adds to JᵀJ only.
+  ev.H = pb.fair_active ? pb.H_fair : MatX::Zero(N, N);
+  ev.g = VecX::Zero(N);
   // Serial reduction in i order: the result does not depend on the thread count.
   for (int i = 0; i < m; ++i) {
     const RowBlock& rb = blocks[static_cast<std::size_t>(i)];
@@ -201,7 +209,6 @@ Evaluation evaluate(Problem& pb, const VecX& x, std::vector<int>& hints, FitTimi
     ev.H.block(lay.c(0), lay.c(0), nc, nc) += rb.Hcc;
     ev.g.segment(lay.c(0), nc) += rb.gc;
   }
-  (void)N;
   timing.assembly_s += seconds_since(t0);
   return ev;
 }
@@ -232,7 +239,7 @@ FitResult fit_motion(const SurfaceIndex& index, const Motion& init_motion,
   const Motion init =
       K == init_motion.count() ? init_motion : init_motion.restricted(0, 1, 0, 1, K);
 
-  Problem pb{index, options, {}, {}, {}, {}, {}, 0, 0, 0, 0, 0, {}};
+  Problem pb{index, options, {}, {}, {}, {}, {}, 0, 0, 0, 0, 0, {}, options.fair_iterations > 0};
   pb.layout.K = K;
   pb.layout.nc = coefficient_count(options.kind);
   pb.knots = init.knots;
@@ -329,10 +336,15 @@ FitResult fit_motion(const SurfaceIndex& index, const Motion& init_motion,
   int iter = 0;
   bool converged = false;
   std::vector<double> values(row_idx.size());
+  const bool trace = std::getenv("FLANK_TRACE_FIT") != nullptr;
   for (; iter < options.max_iterations && !converged; ++iter) {
     if (ev.interior < std::max(nc, n)) {
       result.status = FitStatus::left_surface;
       break;
+    }
+    if (iter == options.fair_iterations && pb.fair_active) {
+      ev.H -= pb.H_fair;
+      pb.fair_active = false;
     }
     const double diag_floor = 1e-12 * ev.H.diagonal().maxCoeff();
     bool accepted = false;
@@ -356,6 +368,9 @@ FitResult fit_motion(const SurfaceIndex& index, const Motion& init_motion,
       const VecX x_new = x + delta;
       std::vector<int> trial_hints = hints;
       Evaluation trial = evaluate(pb, x_new, trial_hints, result.timing);
+      if (trace)
+        std::fprintf(stderr, "iter %d lambda %.3g cost %.6g -> %.6g (fair %.3g) interior %d |step| %.3g\n", iter, lambda,
+                     ev.cost, trial.cost, delta.dot(pb.H_fair * delta), trial.interior, delta.head(6 * K).cwiseAbs().maxCoeff());
       if (trial.cost <= ev.cost && trial.interior >= std::max(nc, n)) {
         const double decrease = ev.cost - trial.cost;
         x = x_new;

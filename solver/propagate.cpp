@@ -1,6 +1,7 @@
 #include "solver/propagate.h"
 
 #include <cmath>
+#include <limits>
 #include <numbers>
 
 #include "kernels/bspline.h"
@@ -31,11 +32,19 @@ Vec2 sunflower(int k, int n) {
 
 RefinedLine refine_line(const SurfaceIndex& index, const Line& start,
                         const RefineLineOptions& options) {
+  MovabilityOptions mo = options.movability;
+  if (options.kind) mo.profile = options.kind;
+  const double L = start.length();
+  auto score = [&](const Movability& m) {
+    if (!m.ok()) return std::numeric_limits<double>::infinity();
+    const double misfit = options.kind ? m.profile_rms / L : 0.0;
+    return m.value + options.profile_weight * misfit * misfit;
+  };
   RefinedLine best;
   best.line = start;
-  best.movability = movability(index, start.a, start.b, options.movability);
+  best.movability = movability(index, start.a, start.b, mo);
+  best.score = score(best.movability);
   best.evaluated = 1;
-  const double L = start.length();
   double radius = options.radius > 0 ? options.radius : 0.05 * L;
   const int c = options.candidates_per_end;
   for (int round = 0; round < options.rounds; ++round) {
@@ -53,14 +62,17 @@ RefinedLine refine_line(const SurfaceIndex& index, const Line& start,
       }
     parallel_for(0, lines.size(), [&](std::size_t b, std::size_t e) {
       for (std::size_t k = b; k < e; ++k)
-        scores[k] = movability(index, lines[k].a, lines[k].b, options.movability);
+        scores[k] = movability(index, lines[k].a, lines[k].b, mo);
     }, 8);
     best.evaluated += static_cast<int>(lines.size());
-    for (std::size_t k = 0; k < lines.size(); ++k)  // serial: ties go to the lower index
-      if (scores[k].ok() && (!best.movability.ok() || scores[k].value < best.movability.value)) {
+    for (std::size_t k = 0; k < lines.size(); ++k) {  // serial: ties go to the lower index
+      const double sk = score(scores[k]);
+      if (sk < best.score) {
+        best.score = sk;
         best.movability = scores[k];
         best.line = lines[k];
       }
+    }
     radius *= 0.5;
   }
   return best;

@@ -3,6 +3,7 @@
 // (§4.3), or take a user's ordered lines as control polygons (§4.4).
 #pragma once
 
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -16,11 +17,17 @@ struct RefineLineOptions {
   int candidates_per_end = 15;  // 15 × 15 endpoint pairs per round, as Fig. 8
   double radius = 0.0;          // search radius in the normal planes; 0: 5% of the line length
   int rounds = 4;               // each round searches around the best so far, radius halved
+  // The cutter the line must suit: candidates are scored F_l + profile_weight·(rms/L)², the
+  // misfit of their footpoint distances to this kind. Without it any line that slides
+  // along itself while its distances vary could look perfectly movable on an envelope.
+  std::optional<CutterKind> kind;
+  double profile_weight = 1.0;
 };
 
 struct RefinedLine {
   Line line;
   Movability movability;
+  double score = 0.0;
   int evaluated = 0;
 };
 
