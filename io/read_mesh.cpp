@@ -1,0 +1,887 @@
+// Mesh readers (STL ASCII/binary, OBJ, PLY ASCII/binary little-endian) and the validation and
+// repair that turn a file into a Mesh the kernels may trust (kernels/mesh.h).
+//
+// Robustness rules: every byte offset is bounds-checked before it is read, every loop consumes
+// input or is bounded by a count that was checked against the file size, and no arithmetic
+// touches a coordinate before it is known to be finite (Debug test builds trap FP exceptions).
+#include "io/read_mesh.h"
+
+#include <algorithm>
+#include <array>
+#include <cerrno>
+#include <charconv>
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <limits>
+#include <memory>
+#include <numeric>
+#include <string_view>
+#include <utility>
+#include <vector>
+
+namespace flank::io {
+namespace {
+
+// Coordinates beyond this cannot come from a real part and would let cross products overflow.
+constexpr double kMaxCoordinate = 1e40;
+// A face is degenerate when its area is at most this times the squared bbox diagonal.
+constexpr double kDegenerateArea = 1e-14;
+constexpr long long kMaxElements = std::numeric_limits<int>::max() - 1;
+
+[[noreturn]] void fail(const std::string& path, const std::string& problem) {
+  throw Error(path + ": " + problem);
+}
+
+// A token from the file, safe to quote in a one-line message.
+std::string token_text(std::string_view token) {
+  std::string out = "'";
+  for (std::size_t i = 0; i < token.size() && i < 24; ++i) {
+    const unsigned char c = static_cast<unsigned char>(token[i]);
+    out += (c >= 0x20 && c < 0x7f) ? static_cast<char>(c) : '?';
+  }
+  if (token.size() > 24) out += "...";
+  return out + "'";
+}
+
+bool equals_ci(std::string_view a, std::string_view b) {
+  if (a.size() != b.size()) return false;
+  for (std::size_t i = 0; i < a.size(); ++i) {
+    char x = a[i], y = b[i];
+    if (x >= 'A' && x <= 'Z') x = static_cast<char>(x - 'A' + 'a');
+    if (y >= 'A' && y <= 'Z') y = static_cast<char>(y - 'A' + 'a');
+    if (x != y) return false;
+  }
+  return true;
+}
+
+bool is_space(char c) {
+  return c == ' ' || c == '\t' || c == '\r' || c == '\n' || c == '\f' || c == '\v';
+}
+
+// Splits off the next whitespace-separated token of `rest`; false when none is left.
+bool next_token(std::string_view& rest, std::string_view& token) {
+  std::size_t i = 0;
+  while (i < rest.size() && is_space(rest[i])) ++i;
+  if (i == rest.size()) {
+    rest = {};
+    return false;
+  }
+  std::size_t j = i;
+  while (j < rest.size() && !is_space(rest[j])) ++j;
+  token = rest.substr(i, j - i);
+  rest.remove_prefix(j);
+  return true;
+}
+
+// Iterates the lines of a text buffer (LF or CRLF), counting them from 1.
+class Lines {
+ public:
+  explicit Lines(std::string_view data) : data_(data) {}
+  bool next(std::string_view& line) {
+    if (pos_ >= data_.size()) return false;
+    const std::size_t end = data_.find('\n', pos_);
+    const std::size_t stop = end == std::string_view::npos ? data_.size() : end;
+    line = data_.substr(pos_, stop - pos_);
+    if (!line.empty() && line.back() == '\r') line.remove_suffix(1);
+    pos_ = stop + 1;
+    ++number_;
+    return true;
+  }
+  int number() const { return number_; }
+  // The line just returned is the last one and has no newline: the file may be cut short.
+  bool cut_short() const { return pos_ > data_.size() && !data_.empty() && data_.back() != '\n'; }
+
+ private:
+  std::string_view data_;
+  std::size_t pos_ = 0;
+  int number_ = 0;
+};
+
+// Parses a whole token as a double. Overflow yields ±inf and underflow 0, so that the caller
+// reports a non-finite coordinate instead of a syntax error. Never raises an FP exception.
+bool parse_double(std::string_view token, double& value) {
+  if (!token.empty() && token[0] == '+') token.remove_prefix(1);
+  if (token.empty()) return false;
+  const char* end = token.data() + token.size();
+  const auto [ptr, ec] = std::from_chars(token.data(), end, value, std::chars_format::general);
+  if (ptr != end) return false;
+  if (ec == std::errc::result_out_of_range) {
+    const bool negative_exponent = token.find("e-") != std::string_view::npos ||
+                                   token.find("E-") != std::string_view::npos;
+    const double inf = std::numeric_limits<double>::infinity();
+    value = negative_exponent ? 0.0 : (token[0] == '-' ? -inf : inf);
+    return true;
+  }
+  return ec == std::errc();
+}
+
+bool parse_integer(std::string_view token, long long& value) {
+  if (!token.empty() && token[0] == '+') token.remove_prefix(1);
+  if (token.empty()) return false;
+  const char* end = token.data() + token.size();
+  const auto [ptr, ec] = std::from_chars(token.data(), end, value);
+  return ec == std::errc() && ptr == end;
+}
+
+std::uint32_t load_u32(const unsigned char* p) {
+  return static_cast<std::uint32_t>(p[0]) | static_cast<std::uint32_t>(p[1]) << 8 |
+         static_cast<std::uint32_t>(p[2]) << 16 | static_cast<std::uint32_t>(p[3]) << 24;
+}
+
+std::uint64_t load_u64(const unsigned char* p) {
+  return static_cast<std::uint64_t>(load_u32(p)) | static_cast<std::uint64_t>(load_u32(p + 4)) << 32;
+}
+
+// Little-endian float32 widened to double. NaN and infinity are produced from constants rather
+// than converted, because converting a signalling NaN raises FE_INVALID.
+double load_f32(const unsigned char* p) {
+  const std::uint32_t bits = load_u32(p);
+  if (((bits >> 23) & 0xffu) == 0xffu) {
+    if (bits & 0x7fffffu) return std::numeric_limits<double>::quiet_NaN();
+    return (bits >> 31) ? -std::numeric_limits<double>::infinity()
+                        : std::numeric_limits<double>::infinity();
+  }
+  float f;
+  std::memcpy(&f, &bits, sizeof f);
+  return static_cast<double>(f);
+}
+
+double load_f64(const unsigned char* p) {
+  const std::uint64_t bits = load_u64(p);
+  if (((bits >> 52) & 0x7ffu) == 0x7ffu) {  // even classifying a signalling NaN may trap
+    if (bits & 0xfffffffffffffull) return std::numeric_limits<double>::quiet_NaN();
+    return (bits >> 63) ? -std::numeric_limits<double>::infinity()
+                        : std::numeric_limits<double>::infinity();
+  }
+  double d;
+  std::memcpy(&d, &bits, sizeof d);
+  return d;
+}
+
+// The file as read: vertex coordinates (3 per vertex) and triangles (3 indices per triangle),
+// indices already checked to be in range, coordinates already checked to be finite.
+struct RawMesh {
+  std::vector<double> xyz;
+  std::vector<int> triangles;
+};
+
+// Finite and in range, or a one-line error naming `where`.
+void check_coordinates(const std::string& path, const double* p, const std::string& where) {
+  for (int k = 0; k < 3; ++k) {
+    if (!std::isfinite(p[k])) fail(path, "non-finite coordinate at " + where);
+    if (std::abs(p[k]) > kMaxCoordinate) fail(path, "coordinate out of range (|x| > 1e40) at " + where);
+  }
+}
+
+void check_vertex_count(const std::string& path, std::size_t vertices) {
+  if (vertices > static_cast<std::size_t>(kMaxElements)) fail(path, "too many vertices");
+}
+
+void fan_triangulate(const std::vector<int>& polygon, std::vector<int>& triangles) {
+  for (std::size_t i = 1; i + 1 < polygon.size(); ++i) {
+    triangles.push_back(polygon[0]);
+    triangles.push_back(polygon[i]);
+    triangles.push_back(polygon[i + 1]);
+  }
+}
+
+std::string_view skip_bom(std::string_view data) {
+  if (data.size() >= 3 && static_cast<unsigned char>(data[0]) == 0xef &&
+      static_cast<unsigned char>(data[1]) == 0xbb && static_cast<unsigned char>(data[2]) == 0xbf)
+    data.remove_prefix(3);
+  return data;
+}
+
+// ---------------------------------------------------------------------------------------- STL
+
+bool starts_with_solid(std::string_view data) {
+  data = skip_bom(data);
+  std::string_view token;
+  return next_token(data, token) && equals_ci(token, "solid");
+}
+
+// Text as ASCII STL or OBJ would be: no control bytes other than whitespace in the first
+// kilobyte (a binary STL has its triangle count and first normal there; a corrupt byte further
+// into an ASCII file is better reported by the ASCII parser).
+bool looks_like_text(std::string_view data) {
+  for (const char ch : data.substr(0, 1024)) {
+    const unsigned char c = static_cast<unsigned char>(ch);
+    if (c < 0x20 && !is_space(ch)) return false;
+    if (c == 0x7f) return false;
+  }
+  return true;
+}
+
+bool binary_stl_size_matches(std::string_view data) {
+  if (data.size() < 84) return false;
+  const std::uint64_t n = load_u32(reinterpret_cast<const unsigned char*>(data.data()) + 80);
+  return n > 0 && 84 + 50 * n == data.size();
+}
+
+RawMesh parse_stl_binary(const std::string& path, std::string_view data) {
+  if (data.size() < 84)
+    fail(path, "truncated binary STL (" + std::to_string(data.size()) +
+                   " bytes, the header alone needs 84)");
+  const auto* bytes = reinterpret_cast<const unsigned char*>(data.data());
+  const std::uint64_t expected = load_u32(bytes + 80);
+  const std::uint64_t holds = (data.size() - 84) / 50;
+  if (expected > holds)
+    fail(path, "truncated binary STL (expected " + std::to_string(expected) +
+                   " triangles, file holds " + std::to_string(holds) + ")");
+  check_vertex_count(path, 3 * expected);
+  RawMesh raw;
+  raw.xyz.reserve(9 * expected);
+  raw.triangles.reserve(3 * expected);
+  for (std::uint64_t t = 0; t < expected; ++t) {
+    const unsigned char* record = bytes + 84 + 50 * t + 12;  // skip the stored normal
+    for (int corner = 0; corner < 3; ++corner) {
+      double p[3];
+      for (int k = 0; k < 3; ++k) p[k] = load_f32(record + 12 * corner + 4 * k);
+      check_coordinates(path, p, "triangle " + std::to_string(t + 1));
+      raw.triangles.push_back(static_cast<int>(raw.xyz.size() / 3));
+      raw.xyz.insert(raw.xyz.end(), p, p + 3);
+    }
+  }
+  return raw;
+}
+
+RawMesh parse_stl_ascii(const std::string& path, std::string_view data) {
+  RawMesh raw;
+  Lines lines(skip_bom(data));
+  std::string_view line, token;
+  bool in_loop = false;
+  std::vector<int> loop;
+  long long facet = 0;
+  while (lines.next(line)) {
+    if (!next_token(line, token)) continue;
+    const std::string at_line = " at line " + std::to_string(lines.number());
+    if (equals_ci(token, "vertex")) {
+      if (!in_loop) fail(path, "vertex outside a facet loop" + at_line);
+      double p[3];
+      std::string_view number;
+      for (int k = 0; k < 3; ++k)
+        if (!next_token(line, number) || !parse_double(number, p[k]))
+          fail(path, (lines.cut_short() ? "truncated ASCII STL (file ends in a vertex)"
+                                        : "malformed vertex, expected 3 numbers") + at_line);
+      check_coordinates(path, p, "facet " + std::to_string(facet + 1) + at_line.substr(1));
+      check_vertex_count(path, raw.xyz.size() / 3 + 1);
+      loop.push_back(static_cast<int>(raw.xyz.size() / 3));
+      raw.xyz.insert(raw.xyz.end(), p, p + 3);
+    } else if (equals_ci(token, "outer")) {
+      if (in_loop) fail(path, "nested 'outer loop'" + at_line);
+      in_loop = true;
+      loop.clear();
+    } else if (equals_ci(token, "endloop")) {
+      if (!in_loop) fail(path, "'endloop' without 'outer loop'" + at_line);
+      if (loop.size() < 3)
+        fail(path, "facet " + std::to_string(facet + 1) + " has only " +
+                       std::to_string(loop.size()) + " vertices" + at_line);
+      fan_triangulate(loop, raw.triangles);
+      in_loop = false;
+      ++facet;
+    } else if (equals_ci(token, "facet") || equals_ci(token, "endfacet") ||
+               equals_ci(token, "solid") || equals_ci(token, "endsolid")) {
+      if (in_loop) fail(path, "facet " + std::to_string(facet + 1) + " loop not closed" + at_line);
+    } else {
+      fail(path, "unexpected " + token_text(token) + " in ASCII STL" + at_line);
+    }
+  }
+  if (in_loop) fail(path, "truncated ASCII STL (facet " + std::to_string(facet + 1) + " not closed)");
+  return raw;
+}
+
+// ---------------------------------------------------------------------------------------- OBJ
+
+RawMesh parse_obj(const std::string& path, std::string_view data) {
+  RawMesh raw;
+  // Positive indices may point forward (many writers emit faces first), so the range is
+  // checked at the end; remember which face each triangle came from for the message.
+  std::vector<long long> indices;
+  std::vector<long long> triangle_face;
+  std::vector<long long> polygon;
+  Lines lines(skip_bom(data));
+  std::string_view line, token;
+  long long face = 0;
+  while (lines.next(line)) {
+    const std::size_t hash = line.find('#');
+    if (hash != std::string_view::npos) line = line.substr(0, hash);
+    if (!next_token(line, token)) continue;
+    const std::string at_line = " (line " + std::to_string(lines.number()) + ")";
+    if (token == "v") {
+      double p[3];
+      std::string_view number;
+      for (int k = 0; k < 3; ++k)
+        if (!next_token(line, number) || !parse_double(number, p[k]))
+          fail(path, (lines.cut_short() ? "truncated OBJ (file ends in a vertex)"
+                                        : "malformed vertex, expected 3 numbers") + at_line);
+      check_coordinates(path, p, "vertex " + std::to_string(raw.xyz.size() / 3 + 1) + at_line);
+      check_vertex_count(path, raw.xyz.size() / 3 + 1);
+      raw.xyz.insert(raw.xyz.end(), p, p + 3);
+    } else if (token == "f") {
+      ++face;
+      polygon.clear();
+      const long long preceding = static_cast<long long>(raw.xyz.size() / 3);
+      std::string_view corner;
+      while (next_token(line, corner)) {
+        long long index;
+        if (!parse_integer(corner.substr(0, corner.find('/')), index))
+          fail(path, "malformed face " + std::to_string(face) + ": " + token_text(corner) + at_line);
+        if (index == 0) fail(path, "face " + std::to_string(face) + " has vertex index 0" + at_line);
+        if (index < 0) {
+          if (index < -preceding)
+            fail(path, "face " + std::to_string(face) + " references vertex " +
+                           std::to_string(index) + " but only " + std::to_string(preceding) +
+                           " vertices precede it" + at_line);
+          polygon.push_back(preceding + index);
+        } else {
+          polygon.push_back(index - 1);
+        }
+      }
+      if (polygon.size() < 3)
+        fail(path, "face " + std::to_string(face) + " has only " + std::to_string(polygon.size()) +
+                       " vertices" + at_line);
+      for (std::size_t i = 1; i + 1 < polygon.size(); ++i) {
+        indices.insert(indices.end(), {polygon[0], polygon[i], polygon[i + 1]});
+        triangle_face.push_back(face);
+      }
+    }
+    // Everything else (vt, vn, g, o, s, usemtl, mtllib, l, p, ...) does not shape Φ.
+  }
+  const long long vertices = static_cast<long long>(raw.xyz.size() / 3);
+  if (static_cast<long long>(indices.size() / 3) > kMaxElements) fail(path, "too many faces");
+  raw.triangles.resize(indices.size());
+  for (std::size_t i = 0; i < indices.size(); ++i) {
+    if (indices[i] >= vertices)
+      fail(path, "face " + std::to_string(triangle_face[i / 3]) + " references vertex " +
+                     std::to_string(indices[i] + 1) + " but the file has " +
+                     std::to_string(vertices) + " vertices");
+    raw.triangles[i] = static_cast<int>(indices[i]);
+  }
+  return raw;
+}
+
+// ---------------------------------------------------------------------------------------- PLY
+
+enum class PlyType { i8, u8, i16, u16, i32, u32, f32, f64 };
+
+bool parse_ply_type(std::string_view name, PlyType& type) {
+  static const std::pair<std::string_view, PlyType> kNames[] = {
+      {"char", PlyType::i8},    {"int8", PlyType::i8},     {"uchar", PlyType::u8},
+      {"uint8", PlyType::u8},   {"short", PlyType::i16},   {"int16", PlyType::i16},
+      {"ushort", PlyType::u16}, {"uint16", PlyType::u16},  {"int", PlyType::i32},
+      {"int32", PlyType::i32},  {"uint", PlyType::u32},    {"uint32", PlyType::u32},
+      {"float", PlyType::f32},  {"float32", PlyType::f32}, {"double", PlyType::f64},
+      {"float64", PlyType::f64}};
+  for (const auto& [text, t] : kNames)
+    if (name == text) {
+      type = t;
+      return true;
+    }
+  return false;
+}
+
+std::size_t ply_type_size(PlyType type) {
+  switch (type) {
+    case PlyType::i8:
+    case PlyType::u8: return 1;
+    case PlyType::i16:
+    case PlyType::u16: return 2;
+    case PlyType::i32:
+    case PlyType::u32:
+    case PlyType::f32: return 4;
+    case PlyType::f64: return 8;
+  }
+  return 1;
+}
+
+bool ply_type_is_integer(PlyType type) { return type != PlyType::f32 && type != PlyType::f64; }
+
+struct PlyProperty {
+  std::string name;
+  bool is_list = false;
+  PlyType count_type = PlyType::u8;
+  PlyType type = PlyType::f32;
+};
+
+struct PlyElement {
+  std::string name;
+  long long count = 0;
+  std::vector<PlyProperty> properties;
+};
+
+enum class ReadStatus { ok, end, malformed };
+
+// Values of the PLY body, one at a time, as doubles (every PLY integer type is exact in a
+// double, so indices lose nothing).
+class PlyBody {
+ public:
+  PlyBody(std::string_view body, bool binary) : body_(body), binary_(binary) {}
+
+  ReadStatus read(PlyType type, double& value) {
+    if (!binary_) {
+      std::string_view token;
+      if (!next_token(body_, token)) return ReadStatus::end;
+      return parse_double(token, value) ? ReadStatus::ok : ReadStatus::malformed;
+    }
+    const std::size_t size = ply_type_size(type);
+    if (body_.size() - pos_ < size) return ReadStatus::end;
+    const auto* p = reinterpret_cast<const unsigned char*>(body_.data()) + pos_;
+    pos_ += size;
+    switch (type) {
+      case PlyType::i8: value = static_cast<std::int8_t>(p[0]); break;
+      case PlyType::u8: value = p[0]; break;
+      case PlyType::i16: value = static_cast<std::int16_t>(p[0] | p[1] << 8); break;
+      case PlyType::u16: value = static_cast<std::uint16_t>(p[0] | p[1] << 8); break;
+      case PlyType::i32: value = static_cast<std::int32_t>(load_u32(p)); break;
+      case PlyType::u32: value = load_u32(p); break;
+      case PlyType::f32: value = load_f32(p); break;
+      case PlyType::f64: value = load_f64(p); break;
+    }
+    return ReadStatus::ok;
+  }
+
+  std::size_t remaining_bytes() const { return body_.size() - pos_; }
+
+ private:
+  std::string_view body_;
+  bool binary_;
+  std::size_t pos_ = 0;
+};
+
+// A count or index value: finite, integral and within [lo, hi].
+bool integral_in(double v, double lo, double hi) {
+  return std::isfinite(v) && v >= lo && v <= hi && v == std::floor(v);
+}
+
+RawMesh parse_ply(const std::string& path, std::string_view data, std::string& format) {
+  // Header.
+  std::size_t pos = 0;
+  std::vector<PlyElement> elements;
+  enum class Encoding { none, ascii, binary_le } encoding = Encoding::none;
+  bool ended = false;
+  for (int number = 1; pos < data.size(); ++number) {
+    const std::size_t end = data.find('\n', pos);
+    if (end == std::string_view::npos) break;
+    std::string_view line = data.substr(pos, end - pos);
+    pos = end + 1;
+    if (!line.empty() && line.back() == '\r') line.remove_suffix(1);
+    const std::string at_line = " at header line " + std::to_string(number);
+    std::string_view keyword;
+    if (!next_token(line, keyword)) continue;
+    if (number == 1) {
+      if (keyword != "ply") fail(path, "not a PLY file (missing 'ply' magic)");
+      continue;
+    }
+    if (keyword == "end_header") {
+      ended = true;
+      break;
+    }
+    if (keyword == "comment" || keyword == "obj_info") continue;
+    std::string_view a, b, c, d;
+    if (keyword == "format") {
+      if (!next_token(line, a)) fail(path, "malformed PLY format line" + at_line);
+      if (a == "ascii") {
+        encoding = Encoding::ascii;
+      } else if (a == "binary_little_endian") {
+        encoding = Encoding::binary_le;
+      } else if (a == "binary_big_endian") {
+        fail(path, "binary_big_endian PLY is unsupported (convert it to binary_little_endian "
+                   "or ascii)");
+      } else {
+        fail(path, "unsupported PLY format " + token_text(a) + at_line);
+      }
+    } else if (keyword == "element") {
+      long long count;
+      if (!next_token(line, a) || !next_token(line, b) || !parse_integer(b, count) || count < 0)
+        fail(path, "malformed PLY element line" + at_line);
+      if (count > kMaxElements) fail(path, "PLY element " + token_text(a) + " is too large" + at_line);
+      elements.push_back({std::string(a), count, {}});
+    } else if (keyword == "property") {
+      if (elements.empty()) fail(path, "PLY property before any element" + at_line);
+      PlyProperty property;
+      if (!next_token(line, a)) fail(path, "malformed PLY property line" + at_line);
+      if (a == "list") {
+        property.is_list = true;
+        if (!next_token(line, b) || !next_token(line, c) || !next_token(line, d) ||
+            !parse_ply_type(b, property.count_type) || !parse_ply_type(c, property.type) ||
+            !ply_type_is_integer(property.count_type))
+          fail(path, "malformed PLY list property" + at_line);
+        property.name = std::string(d);
+      } else {
+        if (!parse_ply_type(a, property.type) || !next_token(line, b))
+          fail(path, "malformed PLY property " + token_text(a) + at_line);
+        property.name = std::string(b);
+      }
+      elements.back().properties.push_back(std::move(property));
+    } else {
+      fail(path, "unexpected " + token_text(keyword) + " in PLY header" + at_line);
+    }
+  }
+  if (!ended) fail(path, "truncated PLY header (no end_header)");
+  if (encoding == Encoding::none) fail(path, "PLY header has no format line");
+  const bool binary = encoding == Encoding::binary_le;
+  format = binary ? "ply-binary" : "ply-ascii";
+
+  // Where x, y, z and the face index list live.
+  const PlyElement* vertex_element = nullptr;
+  const PlyElement* face_element = nullptr;
+  int xyz_property[3] = {-1, -1, -1};
+  int index_property = -1;
+  for (const PlyElement& element : elements) {
+    if (element.name == "vertex" && !vertex_element) {
+      vertex_element = &element;
+      for (std::size_t p = 0; p < element.properties.size(); ++p)
+        for (int k = 0; k < 3; ++k)
+          if (!element.properties[p].is_list && element.properties[p].name == std::string(1, "xyz"[k]))
+            xyz_property[k] = static_cast<int>(p);
+      if (element.count > 0 && (xyz_property[0] < 0 || xyz_property[1] < 0 || xyz_property[2] < 0))
+        fail(path, "PLY vertex element lacks an x, y or z property");
+    } else if (element.name == "face" && !face_element) {
+      face_element = &element;
+      for (std::size_t p = 0; p < element.properties.size(); ++p)
+        if (element.properties[p].is_list && (element.properties[p].name == "vertex_indices" ||
+                                              element.properties[p].name == "vertex_index"))
+          index_property = static_cast<int>(p);
+      if (element.count > 0 && index_property < 0)
+        fail(path, "PLY face element lacks a vertex_indices list");
+    }
+  }
+  if (!vertex_element || vertex_element->count == 0) fail(path, "empty mesh (no vertices)");
+
+  // Body.
+  PlyBody body(data.substr(pos), binary);
+  RawMesh raw;
+  std::vector<long long> indices;
+  std::vector<long long> triangle_face;
+  std::vector<long long> polygon;
+  for (const PlyElement& element : elements) {
+    if (element.properties.empty()) continue;  // rows without properties occupy no bytes
+    const bool is_vertex = &element == vertex_element;
+    const bool is_face = &element == face_element;
+    if (binary) {  // fixed-size rows: check the size before allocating anything
+      std::size_t row = 0;
+      for (const PlyProperty& property : element.properties)
+        row += ply_type_size(property.is_list ? property.count_type : property.type);
+      if (static_cast<std::uint64_t>(element.count) * row > body.remaining_bytes())
+        fail(path, "truncated binary PLY (expected " + std::to_string(element.count) + " " +
+                       element.name + " rows, file holds at most " +
+                       std::to_string(body.remaining_bytes() / row) + ")");
+    }
+    if (is_vertex)  // a count is a claim: reserve no more than the file could hold
+      raw.xyz.reserve(3 * std::min(static_cast<std::size_t>(element.count), data.size() / 2));
+    for (long long r = 0; r < element.count; ++r) {
+      double p[3] = {0, 0, 0};
+      for (std::size_t q = 0; q < element.properties.size(); ++q) {
+        const PlyProperty& property = element.properties[q];
+        const auto where = [&] {
+          return std::string(" in ") + element.name + " " + std::to_string(r) + " of " +
+                 std::to_string(element.count);
+        };
+        const auto read = [&](PlyType type, double& value) {
+          const ReadStatus status = body.read(type, value);
+          if (status == ReadStatus::end) fail(path, "truncated PLY (file ends" + where() + ")");
+          if (status == ReadStatus::malformed) fail(path, "malformed PLY number" + where());
+        };
+        if (!property.is_list) {
+          double value;
+          read(property.type, value);
+          if (is_vertex)
+            for (int k = 0; k < 3; ++k)
+              if (xyz_property[k] == static_cast<int>(q)) p[k] = value;
+          continue;
+        }
+        double count;
+        read(property.count_type, count);
+        if (!integral_in(count, 0, static_cast<double>(kMaxElements)))
+          fail(path, "invalid PLY list length" + where());
+        const bool indices_here = is_face && index_property == static_cast<int>(q);
+        if (indices_here) polygon.clear();
+        for (long long i = 0; i < static_cast<long long>(count); ++i) {
+          double value;
+          read(property.type, value);
+          if (!indices_here) continue;
+          if (!integral_in(value, -9e15, 9e15))
+            fail(path, "invalid vertex index in face " + std::to_string(r));
+          if (value < 0)
+            fail(path, "face " + std::to_string(r) + " references vertex " +
+                           std::to_string(static_cast<long long>(value)));
+          polygon.push_back(static_cast<long long>(value));
+        }
+        if (indices_here) {
+          if (polygon.size() < 3)
+            fail(path, "face " + std::to_string(r) + " has only " +
+                           std::to_string(polygon.size()) + " vertices");
+          for (std::size_t i = 1; i + 1 < polygon.size(); ++i) {
+            indices.insert(indices.end(), {polygon[0], polygon[i], polygon[i + 1]});
+            triangle_face.push_back(r);
+          }
+          if (static_cast<long long>(indices.size() / 3) > kMaxElements)
+            fail(path, "too many faces");
+        }
+      }
+      if (is_vertex) {
+        check_coordinates(path, p, "vertex " + std::to_string(r));
+        raw.xyz.insert(raw.xyz.end(), p, p + 3);
+      }
+    }
+  }
+  const long long vertices = static_cast<long long>(raw.xyz.size() / 3);
+  raw.triangles.resize(indices.size());
+  for (std::size_t i = 0; i < indices.size(); ++i) {
+    if (indices[i] >= vertices)
+      fail(path, "face " + std::to_string(triangle_face[i / 3]) + " references vertex " +
+                     std::to_string(indices[i]) + " but the file has " +
+                     std::to_string(vertices) + " vertices");
+    raw.triangles[i] = static_cast<int>(indices[i]);
+  }
+  return raw;
+}
+
+// ------------------------------------------------------------------------- validate and repair
+
+struct UnionFind {
+  std::vector<int> parent;
+  explicit UnionFind(int n) : parent(n) { std::iota(parent.begin(), parent.end(), 0); }
+  int find(int x) {
+    while (parent[x] != x) x = parent[x] = parent[parent[x]];
+    return x;
+  }
+  void unite(int a, int b) {
+    a = find(a), b = find(b);
+    if (a != b) parent[std::max(a, b)] = std::min(a, b);
+  }
+};
+
+LoadedMesh repair(const std::string& path, RawMesh raw, std::string format,
+                  const ReadOptions& options) {
+  LoadedMesh out;
+  MeshReport& report = out.report;
+  report.format = std::move(format);
+  const int nv = static_cast<int>(raw.xyz.size() / 3);
+  const int nt = static_cast<int>(raw.triangles.size() / 3);
+  report.input_vertices = nv;
+  report.input_faces = nt;
+  if (nv == 0) fail(path, nt == 0 ? "empty mesh (no vertices, no triangles)" : "empty mesh (no vertices)");
+  if (nt == 0) fail(path, "no triangles (" + std::to_string(nv) + " vertices, no faces)");
+
+  // Weld exact duplicates onto the first occurrence, so a clean file keeps its numbering.
+  for (double& x : raw.xyz) x += 0.0;  // −0 → +0: equal coordinates compare equal
+  const auto coord = [&](int v) { return raw.xyz.data() + 3 * static_cast<std::size_t>(v); };
+  std::vector<int> order(nv);
+  std::iota(order.begin(), order.end(), 0);
+  std::stable_sort(order.begin(), order.end(), [&](int a, int b) {
+    return std::lexicographical_compare(coord(a), coord(a) + 3, coord(b), coord(b) + 3);
+  });
+  std::vector<int> representative(nv);
+  int unique = 0;
+  for (int i = 0; i < nv; ++i) {
+    const bool same = i > 0 && std::equal(coord(order[i]), coord(order[i]) + 3, coord(order[i - 1]));
+    if (!same) ++unique;
+    representative[order[i]] = same ? representative[order[i - 1]] : order[i];
+  }
+  report.welded_vertices = nv - unique;
+
+  // Drop degenerate faces: repeated (welded) index or area ≤ 1e-14 · diagonal².
+  Vec3 lo = Vec3::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+  for (int i : raw.triangles) {
+    const Vec3 p(coord(i)[0], coord(i)[1], coord(i)[2]);
+    lo = lo.cwiseMin(p), hi = hi.cwiseMax(p);
+  }
+  const double area_floor = kDegenerateArea * (hi - lo).squaredNorm();
+  std::vector<int> kept;
+  kept.reserve(raw.triangles.size());
+  for (int t = 0; t < nt; ++t) {
+    const int a = representative[raw.triangles[3 * t]];
+    const int b = representative[raw.triangles[3 * t + 1]];
+    const int c = representative[raw.triangles[3 * t + 2]];
+    bool degenerate = a == b || b == c || a == c;
+    if (!degenerate) {
+      const Vec3 pa(coord(a)[0], coord(a)[1], coord(a)[2]);
+      const Vec3 pb(coord(b)[0], coord(b)[1], coord(b)[2]);
+      const Vec3 pc(coord(c)[0], coord(c)[1], coord(c)[2]);
+      degenerate = 0.5 * (pb - pa).cross(pc - pa).norm() <= area_floor;
+    }
+    if (degenerate) {
+      ++report.degenerate_faces;
+      continue;
+    }
+    kept.insert(kept.end(), {a, b, c});
+  }
+  const int nf = static_cast<int>(kept.size() / 3);
+  if (nf == 0)
+    fail(path, nt == 1 ? std::string("the only triangle is degenerate")
+                       : "all " + std::to_string(nt) + " triangles are degenerate");
+
+  // Remove unused vertices, keeping the file's order.
+  std::vector<int> new_index(nv, -1);
+  for (int v : kept) new_index[v] = 0;
+  int used = 0;
+  for (int v = 0; v < nv; ++v)
+    if (new_index[v] == 0) new_index[v] = used++;
+  report.unused_vertices = unique - used;
+  Mesh& mesh = out.mesh;
+  mesh.V.resize(used, 3);
+  for (int v = 0; v < nv; ++v)
+    if (new_index[v] >= 0) mesh.V.row(new_index[v]) << coord(v)[0], coord(v)[1], coord(v)[2];
+  mesh.F.resize(nf, 3);
+  for (int f = 0; f < nf; ++f)
+    for (int k = 0; k < 3; ++k) mesh.F(f, k) = new_index[kept[3 * f + k]];
+
+  // Edges: sort the 3F half-edges by undirected key; a run of equal keys is one edge.
+  struct HalfEdge {
+    std::uint64_t key;
+    int face;
+    bool forward;  // runs from the smaller to the larger index
+  };
+  std::vector<HalfEdge> half(3 * static_cast<std::size_t>(nf));
+  for (int f = 0; f < nf; ++f)
+    for (int k = 0; k < 3; ++k) {
+      const auto u = static_cast<std::uint64_t>(mesh.F(f, k));
+      const auto v = static_cast<std::uint64_t>(mesh.F(f, (k + 1) % 3));
+      half[3 * f + k] = {std::min(u, v) << 32 | std::max(u, v), f, u < v};
+    }
+  std::sort(half.begin(), half.end(), [](const HalfEdge& x, const HalfEdge& y) {
+    return x.key != y.key ? x.key < y.key : x.face < y.face;
+  });
+  UnionFind components(nf);
+  // Manifold edges carry the orientation constraint: `same` means both faces run the edge in
+  // the same direction, i.e. one of them must be flipped.
+  // A face has at most one neighbour across each of its three edges.
+  struct Neighbour {
+    int face = -1;
+    bool same = false;
+  };
+  std::vector<std::array<Neighbour, 3>> neighbours(nf);
+  std::vector<unsigned char> neighbour_count(nf, 0);
+  const auto link = [&](int f, int g, bool same) { neighbours[f][neighbour_count[f]++] = {g, same}; };
+  for (std::size_t i = 0; i < half.size();) {
+    std::size_t j = i + 1;
+    while (j < half.size() && half[j].key == half[i].key) ++j;
+    const std::size_t n = j - i;
+    if (n == 1) ++report.boundary_edges;
+    if (n > 2) ++report.non_manifold_edges;
+    for (std::size_t k = i + 1; k < j; ++k) components.unite(half[i].face, half[k].face);
+    if (n == 2) {
+      const bool same = half[i].forward == half[i + 1].forward;
+      link(half[i].face, half[i + 1].face, same);
+      link(half[i + 1].face, half[i].face, same);
+    }
+    i = j;
+  }
+  for (int f = 0; f < nf; ++f)
+    if (components.find(f) == f) ++report.components;
+
+  // Consistent orientation by BFS over manifold edges; per patch, keep the orientation that
+  // the larger area had in the file (ties: the patch's first face keeps its orientation).
+  const VecX area = face_areas(mesh);
+  std::vector<signed char> flip(nf, -1);
+  std::vector<int> queue;
+  for (int seed = 0; seed < nf; ++seed) {
+    if (flip[seed] >= 0) continue;
+    queue.assign(1, seed);
+    flip[seed] = 0;
+    for (std::size_t head = 0; head < queue.size(); ++head) {
+      const int f = queue[head];
+      for (int k = 0; k < neighbour_count[f]; ++k) {
+        const int g = neighbours[f][k].face;
+        const signed char want = static_cast<signed char>(flip[f] ^ (neighbours[f][k].same ? 1 : 0));
+        if (flip[g] < 0) {
+          flip[g] = want;
+          queue.push_back(g);
+        } else if (flip[g] != want) {
+          report.orientable = false;
+        }
+      }
+    }
+    double flipped_area = 0.0, kept_area = 0.0;
+    for (int f : queue) (flip[f] ? flipped_area : kept_area) += area(f);
+    if (flipped_area > kept_area)
+      for (int f : queue) flip[f] ^= 1;
+  }
+  for (int f = 0; f < nf; ++f)
+    if (flip[f]) {
+      std::swap(mesh.F(f, 1), mesh.F(f, 2));
+      ++report.flipped_faces;
+    }
+  if (options.flip) mesh.F.col(1).swap(mesh.F.col(2));
+  return out;
+}
+
+std::string lower_extension(const std::string& path) {
+  std::string ext = std::filesystem::path(path).extension().string();
+  for (char& c : ext)
+    if (c >= 'A' && c <= 'Z') c = static_cast<char>(c - 'A' + 'a');
+  return ext;
+}
+
+std::string read_file(const std::string& path) {
+  std::error_code ec;
+  if (std::filesystem::is_directory(path, ec)) fail(path, "cannot open (Is a directory)");
+  struct Closer {
+    void operator()(std::FILE* f) const { std::fclose(f); }
+  };
+  std::unique_ptr<std::FILE, Closer> file(std::fopen(path.c_str(), "rb"));
+  if (!file) fail(path, std::string("cannot open (") + std::strerror(errno) + ")");
+  std::string data;
+  const auto size = std::filesystem::file_size(path, ec);
+  if (!ec) data.reserve(size);
+  char buffer[1 << 16];
+  std::size_t n;
+  while ((n = std::fread(buffer, 1, sizeof buffer, file.get())) > 0) data.append(buffer, n);
+  if (std::ferror(file.get())) fail(path, std::string("cannot read (") + std::strerror(errno) + ")");
+  return data;
+}
+
+bool has_obj_vertex_line(std::string_view data) {
+  Lines lines(skip_bom(data));
+  std::string_view line, token;
+  while (lines.next(line))
+    if (next_token(line, token) && token == "v") return true;
+  return false;
+}
+
+}  // namespace
+
+LoadedMesh read_mesh(const std::string& path, const ReadOptions& options) {
+  const std::string data = read_file(path);
+  if (data.empty()) fail(path, "empty file");
+  const std::string_view view(data);
+  const std::string ext = lower_extension(path);
+  const bool ply_magic = view.substr(0, 4) == "ply\n" || view.substr(0, 5) == "ply\r\n";
+
+  std::string format;
+  RawMesh raw;
+  if (ply_magic || ext == ".ply") {
+    if (!ply_magic) fail(path, "not a PLY file (missing 'ply' magic)");
+    raw = parse_ply(path, view, format);
+  } else if (ext == ".obj") {
+    format = "obj";
+    raw = parse_obj(path, view);
+  } else {
+    // STL, or sniff an unknown extension. Binary STL headers may start with "solid" too: the
+    // size 84 + 50·N decides, unless the file is plainly ASCII STL text.
+    const bool solid = starts_with_solid(view);
+    const bool text = looks_like_text(view);
+    const bool ascii_stl = solid && text && view.find("facet") != std::string_view::npos;
+    const bool stl = ext == ".stl";
+    if ((stl || ascii_stl) && solid && text && !(binary_stl_size_matches(view) && !ascii_stl)) {
+      format = "stl-ascii";
+      raw = parse_stl_ascii(path, view);
+    } else if (stl || binary_stl_size_matches(view)) {
+      format = "stl-binary";
+      raw = parse_stl_binary(path, view);
+    } else if (text && has_obj_vertex_line(view)) {
+      format = "obj";
+      raw = parse_obj(path, view);
+    } else {
+      fail(path, "unsupported mesh format" + (ext.empty() ? std::string() : " " + token_text(ext)) +
+                     " (expected STL, OBJ or PLY)");
+    }
+  }
+  return repair(path, std::move(raw), std::move(format), options);
+}
+
+}  // namespace flank::io

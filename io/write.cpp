@@ -1,0 +1,439 @@
+// Writers: meshes, patches.json (flank-patches/1), envelopes.ply, design.ply, toolpath.apt.
+// Every file goes through write_file_atomic; every byte is deterministic (fixed formats, no
+// locale-dependent or pointer-dependent output).
+#include "io/write.h"
+
+#include <algorithm>
+#include <array>
+#include <charconv>
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <cstring>
+#include <limits>
+#include <nlohmann/json.hpp>
+#include <string>
+
+#include "io/read_mesh.h"
+#include "kernels/cutter.h"
+
+namespace flank::io {
+namespace {
+
+namespace fs = std::filesystem;
+using Json = nlohmann::ordered_json;
+
+[[noreturn]] void fail(const fs::path& path, const std::string& problem) {
+  throw Error(path.string() + ": " + problem);
+}
+
+std::string lower_extension(const fs::path& path) {
+  std::string ext = path.extension().string();
+  for (char& c : ext)
+    if (c >= 'A' && c <= 'Z') c = static_cast<char>(c - 'A' + 'a');
+  return ext;
+}
+
+// Little-endian binary output into a byte buffer.
+class Bytes {
+ public:
+  void u8(std::uint8_t v) { data_.push_back(static_cast<char>(v)); }
+  void u16(std::uint16_t v) { le(v, 2); }
+  void u32(std::uint32_t v) { le(v, 4); }
+  void i32(std::int32_t v) { le(static_cast<std::uint32_t>(v), 4); }
+  void f32(double v) {
+    const float f = to_float(v);
+    std::uint32_t bits;
+    std::memcpy(&bits, &f, sizeof bits);
+    le(bits, 4);
+  }
+  void f64(double v) {
+    std::uint64_t bits;
+    std::memcpy(&bits, &v, sizeof bits);
+    le(bits, 8);
+  }
+  void text(const std::string& s) { data_ += s; }
+  const std::string& str() const { return data_; }
+
+ private:
+  // Out-of-range values become ±inf without an overflow exception (Debug tests trap them).
+  static float to_float(double v) {
+    if (std::isnan(v)) return std::numeric_limits<float>::quiet_NaN();
+    if (std::abs(v) > std::numeric_limits<float>::max())
+      return v > 0 ? std::numeric_limits<float>::infinity() : -std::numeric_limits<float>::infinity();
+    return static_cast<float>(v);
+  }
+  void le(std::uint64_t v, int bytes) {
+    for (int k = 0; k < bytes; ++k) data_.push_back(static_cast<char>((v >> (8 * k)) & 0xffu));
+  }
+  std::string data_;
+};
+
+// Shortest text that reads back to the same double.
+std::string shortest(double v) {
+  char buffer[32];
+  const auto result = std::to_chars(buffer, buffer + sizeof buffer, v);
+  return std::string(buffer, result.ptr);
+}
+
+// "%.6f" without a negative zero, so that output does not depend on rounding noise.
+std::string fixed6(double v) {
+  char buffer[64];
+  std::snprintf(buffer, sizeof buffer, "%.6f", v);
+  if (std::strcmp(buffer, "-0.000000") == 0) return "0.000000";
+  return buffer;
+}
+
+Vec3 vertex(const Mesh& mesh, int f, int k) { return mesh.V.row(mesh.F(f, k)).transpose(); }
+
+void write_stl(std::ostream& out, const Mesh& mesh) {
+  Bytes b;
+  std::string header = "flank binary STL";  // must not start with "solid"
+  header.resize(80, ' ');
+  b.text(header);
+  b.u32(static_cast<std::uint32_t>(mesh.face_count()));
+  for (int f = 0; f < mesh.face_count(); ++f) {
+    const Vec3 p0 = vertex(mesh, f, 0), p1 = vertex(mesh, f, 1), p2 = vertex(mesh, f, 2);
+    Vec3 n = (p1 - p0).cross(p2 - p0);
+    const double length = n.norm();
+    n = length > 0 ? Vec3(n / length) : Vec3::Zero();
+    for (const Vec3& p : {n, p0, p1, p2})
+      for (int k = 0; k < 3; ++k) b.f32(p(k));
+    b.u16(0);
+  }
+  out << b.str();
+}
+
+void write_obj(std::ostream& out, const Mesh& mesh) {
+  std::string s = "# flank mesh: " + std::to_string(mesh.vertex_count()) + " vertices, " +
+                  std::to_string(mesh.face_count()) + " triangles\n";
+  for (int v = 0; v < mesh.vertex_count(); ++v)
+    s += "v " + shortest(mesh.V(v, 0)) + " " + shortest(mesh.V(v, 1)) + " " +
+         shortest(mesh.V(v, 2)) + "\n";
+  for (int f = 0; f < mesh.face_count(); ++f)
+    s += "f " + std::to_string(mesh.F(f, 0) + 1) + " " + std::to_string(mesh.F(f, 1) + 1) + " " +
+         std::to_string(mesh.F(f, 2) + 1) + "\n";
+  out << s;
+}
+
+void append_faces(Bytes& b, const Faces& F, int offset) {
+  for (Eigen::Index f = 0; f < F.rows(); ++f) {
+    b.u8(3);
+    for (int k = 0; k < 3; ++k) b.i32(F(f, k) + offset);
+  }
+}
+
+void write_ply(std::ostream& out, const Mesh& mesh) {
+  Bytes b;
+  b.text("ply\nformat binary_little_endian 1.0\ncomment flank mesh\nelement vertex " +
+         std::to_string(mesh.vertex_count()) +
+         "\nproperty double x\nproperty double y\nproperty double z\nelement face " +
+         std::to_string(mesh.face_count()) + "\nproperty list uchar int vertex_indices\nend_header\n");
+  for (int v = 0; v < mesh.vertex_count(); ++v)
+    for (int k = 0; k < 3; ++k) b.f64(mesh.V(v, k));
+  append_faces(b, mesh.F, 0);
+  out << b.str();
+}
+
+Json number(double v) { return std::isfinite(v) ? Json(v) : Json(nullptr); }
+
+Json point(const Eigen::Ref<const Eigen::RowVector3d>& p) {
+  return Json::array({number(p(0)), number(p(1)), number(p(2))});
+}
+
+Json points(const Points& P) {
+  Json out = Json::array();
+  for (Eigen::Index i = 0; i < P.rows(); ++i) out.push_back(point(P.row(i)));
+  return out;
+}
+
+Json setting_value(const SettingValue& value) {
+  return std::visit(
+      [](const auto& v) -> Json {
+        using T = std::decay_t<decltype(v)>;
+        if constexpr (std::is_same_v<T, double>) {
+          return number(v);
+        } else if constexpr (std::is_same_v<T, std::vector<double>>) {
+          Json out = Json::array();
+          for (double x : v) out.push_back(number(x));
+          return out;
+        } else {
+          return Json(v);
+        }
+      },
+      value);
+}
+
+// The cutter's coefficients must match its kind before radius() may be evaluated.
+void check_cutter(const fs::path& path, const Patch& patch) {
+  const Cutter& c = patch.cutter;
+  if (c.coeffs.size() != coefficient_count(c.kind))
+    fail(path, "patch " + std::to_string(patch.id) + ": a " + std::string(to_string(c.kind)) +
+                   " cutter needs " + std::to_string(coefficient_count(c.kind)) +
+                   " coefficients, it has " + std::to_string(c.coeffs.size()));
+}
+
+constexpr int kRadiusSamples = 101;
+
+Json tool_json(const Cutter& c) {
+  Json s = Json::array(), d = Json::array(), profile = Json::array(), coefficients = Json::array();
+  for (int i = 0; i < kRadiusSamples; ++i) {
+    const double t = i / static_cast<double>(kRadiusSamples - 1);
+    s.push_back(number(t));
+    d.push_back(number(c.radius(t)));
+    if (c.length > 0 && std::isfinite(c.length)) {
+      const Vec2 m = c.meridian(t);
+      profile.push_back(Json::array({number(m(0)), number(m(1))}));
+    } else {
+      profile.push_back(Json::array({nullptr, nullptr}));
+    }
+  }
+  for (Eigen::Index k = 0; k < c.coeffs.size(); ++k) coefficients.push_back(number(c.coeffs(k)));
+  Json tool;
+  tool["kind"] = std::string(to_string(c.kind));
+  tool["length"] = number(c.length);
+  tool["radii"] = Json{{"s", std::move(s)}, {"d", std::move(d)}};
+  tool["coefficients"] = std::move(coefficients);
+  tool["profile"] = std::move(profile);
+  return tool;
+}
+
+Json patch_json(const Patch& p) {
+  Json out;
+  out["id"] = p.id;
+  out["tool"] = tool_json(p.cutter);
+  Json motion;
+  motion["degree"] = 3;
+  Json knots = Json::array();
+  for (double k : p.motion.knots) knots.push_back(number(k));
+  motion["knots"] = std::move(knots);
+  motion["a"] = points(p.motion.a);
+  motion["b"] = points(p.motion.b);
+  out["motion"] = std::move(motion);
+  out["tip"] = std::string(1, p.tip);
+  out["error"] = Json{{"max", number(p.error.max)},
+                      {"rms", number(p.error.rms)},
+                      {"max_gouge", number(p.error.max_gouge)},
+                      {"max_relative", number(p.error.max_relative)}};
+  out["coverage"] = Json{{"area", number(p.covered_area)}, {"fraction", number(p.coverage_fraction)}};
+  Json collision;
+  collision["holder_clear"] = p.collision.holder_clear;
+  collision["min_clearance"] =
+      p.collision.checked ? number(p.collision.min_clearance) : Json(nullptr);
+  collision["holder"] = p.collision.checked ? Json::array({number(p.collision.holder_length),
+                                                           number(p.collision.holder_radius)})
+                                            : Json(nullptr);
+  out["collision"] = std::move(collision);
+  return out;
+}
+
+// Diverging map over ±tolerance: gouge (e < 0) red, material left (e > 0) blue, white at 0.
+std::array<std::uint8_t, 3> error_colour(double e, double tolerance) {
+  if (!std::isfinite(e)) return {128, 128, 128};
+  const double t = std::abs(e) >= tolerance ? 1.0 : std::abs(e) / tolerance;
+  const auto fade = static_cast<std::uint8_t>(std::lround(255.0 * (1.0 - t)));
+  if (e < 0) return {255, fade, fade};
+  return {fade, fade, 255};
+}
+
+// Distinct, colour-blind-friendly hues (Tableau 10 without its pink, which is near magenta).
+constexpr std::array<std::array<std::uint8_t, 3>, 11> kPalette = {{{31, 119, 180},
+                                                                    {255, 127, 14},
+                                                                    {44, 160, 44},
+                                                                    {214, 39, 40},
+                                                                    {148, 103, 189},
+                                                                    {140, 86, 75},
+                                                                    {127, 127, 127},
+                                                                    {188, 189, 34},
+                                                                    {23, 190, 207},
+                                                                    {174, 199, 232},
+                                                                    {255, 187, 120}}};
+constexpr std::array<std::uint8_t, 3> kUncovered = {255, 0, 255};
+
+// One line of APT text: no control characters.
+std::string apt_text(const std::string& s) {
+  std::string out;
+  for (char c : s) out += (static_cast<unsigned char>(c) < 0x20 || c == 0x7f) ? ' ' : c;
+  return out;
+}
+
+void check_motion(const fs::path& path, const Patch& p) {
+  const Motion& m = p.motion;
+  if (m.count() < 4 || m.b.rows() != m.a.rows() ||
+      m.knots.size() != static_cast<std::size_t>(m.count() + 4))
+    fail(path, "patch " + std::to_string(p.id) + " has no valid cubic motion (" +
+                   std::to_string(m.count()) + " control points, " +
+                   std::to_string(m.knots.size()) + " knots)");
+  if (p.tip != 'a' && p.tip != 'b')
+    fail(path, "patch " + std::to_string(p.id) + " has tip '" + apt_text(std::string(1, p.tip)) +
+                   "' (expected a or b)");
+}
+
+}  // namespace
+
+void write_mesh(const fs::path& path, const Mesh& mesh) {
+  const std::string ext = lower_extension(path);
+  if (ext == ".stl") {
+    write_file_atomic(path, [&](std::ostream& out) { write_stl(out, mesh); });
+  } else if (ext == ".obj") {
+    write_file_atomic(path, [&](std::ostream& out) { write_obj(out, mesh); });
+  } else if (ext == ".ply") {
+    write_file_atomic(path, [&](std::ostream& out) { write_ply(out, mesh); });
+  } else {
+    fail(path, "unsupported mesh extension '" + apt_text(ext) + "' (expected .stl, .obj or .ply)");
+  }
+}
+
+void write_patches_json(const fs::path& path, const RunInfo& run, const std::vector<Patch>& patches) {
+  for (const Patch& p : patches) check_cutter(path, p);
+  Json root;
+  root["format"] = "flank-patches/1";
+  root["units"] = "mm";
+  root["input"] = Json{{"path", run.input_path},
+                       {"vertices", run.vertices},
+                       {"triangles", run.triangles},
+                       {"bbox_diagonal", number(run.bbox_diagonal)}};
+  Json settings = Json::object();
+  for (const Setting& s : run.settings) settings[s.key] = setting_value(s.value);
+  root["settings"] = std::move(settings);
+  root["coverage"] = Json{{"fraction", number(run.coverage_fraction)},
+                          {"tolerance", number(run.tolerance)},
+                          {"uncovered_area", number(run.uncovered_area)}};
+  Json timing = Json::object();
+  for (const auto& [name, seconds] : run.timing_s) timing[name] = number(seconds);
+  root["timing_s"] = std::move(timing);
+  Json list = Json::array();
+  for (const Patch& p : patches) list.push_back(patch_json(p));
+  root["patches"] = std::move(list);
+  // Invalid UTF-8 in a path or setting is replaced rather than thrown.
+  const std::string text = root.dump(1, ' ', false, Json::error_handler_t::replace) + "\n";
+  write_file_atomic(path, [&](std::ostream& out) { out << text; });
+}
+
+void write_envelopes_ply(const fs::path& path, const std::vector<Patch>& patches, double tolerance) {
+  long long vertices = 0, faces = 0;
+  for (const Patch& p : patches) {
+    vertices += p.envelope.V.rows();
+    faces += p.envelope.F.rows();
+  }
+  if (vertices > std::numeric_limits<int>::max() || faces > std::numeric_limits<int>::max())
+    fail(path, "envelopes too large for a PLY file with int indices");
+  // Without a usable tolerance, saturate at the largest |e| present.
+  if (!(tolerance > 0) || !std::isfinite(tolerance)) {
+    tolerance = 0.0;
+    for (const Patch& p : patches)
+      for (Eigen::Index i = 0; i < p.envelope.error.size(); ++i)
+        if (std::isfinite(p.envelope.error(i)))
+          tolerance = std::max(tolerance, std::abs(p.envelope.error(i)));
+    if (!(tolerance > 0)) tolerance = 1.0;
+  }
+  Bytes b;
+  b.text("ply\nformat binary_little_endian 1.0\n"
+         "comment flank envelopes: signed error e (e > 0 material left, e < 0 gouge)\n"
+         "comment colour: red gouge, white 0, blue material left, saturated at +-" +
+         shortest(tolerance) + "\nelement vertex " + std::to_string(vertices) +
+         "\nproperty float x\nproperty float y\nproperty float z\nproperty float error\n"
+         "property uchar red\nproperty uchar green\nproperty uchar blue\nproperty int patch\n"
+         "element face " + std::to_string(faces) +
+         "\nproperty list uchar int vertex_indices\nend_header\n");
+  for (const Patch& p : patches) {
+    const EnvelopeMesh& env = p.envelope;
+    for (Eigen::Index i = 0; i < env.V.rows(); ++i) {
+      const double e = i < env.error.size() ? env.error(i) : std::numeric_limits<double>::quiet_NaN();
+      for (int k = 0; k < 3; ++k) b.f32(env.V(i, k));
+      b.f32(e);
+      for (std::uint8_t c : error_colour(e, tolerance)) b.u8(c);
+      b.i32(p.id);
+    }
+  }
+  int offset = 0;
+  for (const Patch& p : patches) {
+    append_faces(b, p.envelope.F, offset);
+    offset += static_cast<int>(p.envelope.V.rows());
+  }
+  write_file_atomic(path, [&](std::ostream& out) { out << b.str(); });
+}
+
+void write_design_ply(const fs::path& path, const Mesh& mesh, const std::vector<int>& vertex_patch) {
+  if (vertex_patch.size() != static_cast<std::size_t>(mesh.vertex_count()))
+    fail(path, "vertex_patch has " + std::to_string(vertex_patch.size()) + " entries for " +
+                   std::to_string(mesh.vertex_count()) + " vertices");
+  Bytes b;
+  b.text("ply\nformat binary_little_endian 1.0\n"
+         "comment flank design surface: patch = covering patch id, -1 uncovered (magenta)\n"
+         "element vertex " + std::to_string(mesh.vertex_count()) +
+         "\nproperty float x\nproperty float y\nproperty float z\n"
+         "property uchar red\nproperty uchar green\nproperty uchar blue\nproperty int patch\n"
+         "element face " + std::to_string(mesh.face_count()) +
+         "\nproperty list uchar int vertex_indices\nend_header\n");
+  for (int v = 0; v < mesh.vertex_count(); ++v) {
+    for (int k = 0; k < 3; ++k) b.f32(mesh.V(v, k));
+    const int id = vertex_patch[v];
+    const auto& colour = id < 0 ? kUncovered : kPalette[static_cast<std::size_t>(id) % kPalette.size()];
+    for (std::uint8_t c : colour) b.u8(c);
+    b.i32(id < 0 ? -1 : id);
+  }
+  append_faces(b, mesh.F, 0);
+  write_file_atomic(path, [&](std::ostream& out) { out << b.str(); });
+}
+
+void write_toolpath_apt(const fs::path& path, const std::vector<Patch>& patches,
+                        int steps_per_patch, const std::string& part_name) {
+  if (steps_per_patch < 1)
+    fail(path, "steps per patch must be at least 1 (got " + std::to_string(steps_per_patch) + ")");
+  const std::string name = part_name.empty() ? std::string("FLANK") : apt_text(part_name);
+  std::string s;
+  s += "$$ flank toolpath - part " + name + ", " + std::to_string(patches.size()) + " patches\n";
+  s += "$$ units mm; GOTO/x,y,z,i,j,k = tip point, unit tool axis toward the spindle\n";
+  s += "$$ no approach or retract moves between patches: the post-processor adds them\n";
+  s += "PARTNO/" + name + "\n";
+  s += "UNITS/MM\n";
+  for (const Patch& p : patches) {
+    check_cutter(path, p);
+    check_motion(path, p);
+    const Cutter& c = p.cutter;
+    const std::string id = std::to_string(p.id);
+    s += "$$ patch " + id + ": " + std::string(to_string(c.kind)) + " cutter, length " +
+         fixed6(c.length) + ", tip at " + p.tip + "(t)\n";
+    s += "$$ sphere radii d(0)=" + fixed6(c.radius(0.0)) + ", d(0.5)=" + fixed6(c.radius(0.5)) +
+         ", d(1)=" + fixed6(c.radius(1.0)) + "\n";
+    std::string coefficients;
+    for (Eigen::Index k = 0; k < c.coeffs.size(); ++k)
+      coefficients += (k ? ", " : "") + fixed6(c.coeffs(k));
+    s += "$$ coefficients: " + coefficients + "\n";
+    double max_r = 0.0;
+    std::string meridian;
+    if (c.length > 0 && std::isfinite(c.length)) {
+      for (int i = 0; i < kRadiusSamples; ++i) {
+        const double r = c.meridian(i / static_cast<double>(kRadiusSamples - 1))(1);
+        if (std::isfinite(r)) max_r = std::max(max_r, r);
+      }
+      for (int i = 0; i <= 4; ++i) {
+        const Vec2 m = c.meridian(i / 4.0);
+        meridian += " (" + fixed6(m(0)) + ", " + fixed6(m(1)) + ")";
+      }
+    }
+    s += "$$ meridian (z from a, r):" + meridian + "\n";
+    s += "$$ error max " + fixed6(p.error.max) + ", rms " + fixed6(p.error.rms) + ", max gouge " +
+         fixed6(p.error.max_gouge) + "\n";
+    s += "CUTTER/" + fixed6(2.0 * max_r) + ",0.000000,0.000000,0.000000,0.000000,0.000000," +
+         fixed6(c.length) + "\n";
+    s += "MULTAX/ON\n";
+    for (int i = 0; i <= steps_per_patch; ++i) {
+      const double t = i / static_cast<double>(steps_per_patch);
+      const Vec3 a = p.motion.a_at(t), b = p.motion.b_at(t);
+      const Vec3 tip = p.tip == 'a' ? a : b;
+      const Vec3 toward = p.tip == 'a' ? Vec3(b - a) : Vec3(a - b);
+      const double length = toward.norm();
+      if (!tip.allFinite() || !std::isfinite(length) || !(length > 0))
+        fail(path, "patch " + id + " has no tool axis at t = " + fixed6(t));
+      const Vec3 axis = toward / length;
+      s += "GOTO/" + fixed6(tip(0)) + "," + fixed6(tip(1)) + "," + fixed6(tip(2)) + "," +
+           fixed6(axis(0)) + "," + fixed6(axis(1)) + "," + fixed6(axis(2)) + "\n";
+    }
+  }
+  s += "FINI\n";
+  write_file_atomic(path, [&](std::ostream& out) { out << s; });
+}
+
+}  // namespace flank::io

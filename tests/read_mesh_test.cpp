@@ -1,0 +1,461 @@
+// io::read_mesh: every format reads to the same mesh, repairs are counted, bad input throws one
+// line naming the file, and no prefix or garbage crashes the reader.
+#include "io/read_mesh.h"
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <cstdint>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <limits>
+#include <numbers>
+#include <random>
+#include <sstream>
+#include <string>
+#include <vector>
+
+namespace flank::io {
+namespace {
+
+namespace fs = std::filesystem;
+
+const std::string kData = FLANK_TEST_DATA_DIR;
+
+// Unit cube, vertex i = (i & 1, i >> 1 & 1, i >> 2 & 1), quads counter-clockwise from outside.
+const std::array<std::array<int, 4>, 6> kCubeQuads = {
+    {{0, 2, 3, 1}, {4, 5, 7, 6}, {0, 1, 5, 4}, {2, 6, 7, 3}, {0, 4, 6, 2}, {1, 3, 7, 5}}};
+
+Vec3 cube_vertex(int i) { return Vec3(i & 1, (i >> 1) & 1, (i >> 2) & 1); }
+
+std::vector<std::array<int, 3>> cube_triangles() {
+  std::vector<std::array<int, 3>> out;
+  for (const auto& q : kCubeQuads) {
+    out.push_back({q[0], q[1], q[2]});
+    out.push_back({q[0], q[2], q[3]});
+  }
+  return out;
+}
+
+void put_u32(std::string& s, std::uint32_t v) {
+  for (int k = 0; k < 4; ++k) s.push_back(static_cast<char>((v >> (8 * k)) & 0xff));
+}
+void put_f32(std::string& s, float f) {
+  std::uint32_t bits;
+  std::memcpy(&bits, &f, 4);
+  put_u32(s, bits);
+}
+void put_f64(std::string& s, double d) {
+  std::uint64_t bits;
+  std::memcpy(&bits, &d, 8);
+  put_u32(s, static_cast<std::uint32_t>(bits));
+  put_u32(s, static_cast<std::uint32_t>(bits >> 32));
+}
+
+// A binary STL whose header starts with "solid", as some exporters write it.
+std::string cube_binary_stl(std::uint32_t claimed = 12) {
+  std::string s = "solid cube written as binary";
+  s.resize(80, ' ');
+  put_u32(s, claimed);
+  for (const auto& t : cube_triangles()) {
+    for (int k = 0; k < 3; ++k) put_f32(s, 0.0f);  // normal: readers must not trust it
+    for (int i : t)
+      for (int k = 0; k < 3; ++k) put_f32(s, static_cast<float>(cube_vertex(i)(k)));
+    s += std::string(2, '\0');
+  }
+  return s;
+}
+
+// Binary little-endian PLY: double coordinates, a list property to skip in the vertex
+// element, faces as quads with an int count and uint indices named vertex_index.
+std::string cube_binary_ply() {
+  std::string s =
+      "ply\r\nformat binary_little_endian 1.0\r\ncomment cube\r\nelement vertex 8\r\n"
+      "property double x\r\nproperty short tag\r\nproperty double y\r\nproperty double z\r\n"
+      "property list uchar ushort neighbours\r\nelement face 6\r\n"
+      "property list int uint vertex_index\r\nproperty double area\r\nend_header\r\n";
+  for (int i = 0; i < 8; ++i) {
+    const Vec3 p = cube_vertex(i);
+    put_f64(s, p.x());
+    s += std::string("\x07\x00", 2);
+    put_f64(s, p.y());
+    put_f64(s, p.z());
+    s.push_back(2);
+    s += std::string("\x01\x00\x02\x00", 4);
+  }
+  for (const auto& q : kCubeQuads) {
+    put_u32(s, 4);
+    for (int i : q) put_u32(s, static_cast<std::uint32_t>(i));
+    put_f64(s, 1.0);
+  }
+  return s;
+}
+
+// Triangles as coordinate triples, each rotated to start at its smallest corner (keeping the
+// orientation), sorted: equal for two meshes that differ only in vertex numbering.
+std::vector<std::array<double, 9>> canonical(const Mesh& mesh) {
+  std::vector<std::array<double, 9>> out;
+  for (int f = 0; f < mesh.face_count(); ++f) {
+    std::array<std::array<double, 3>, 3> c;
+    for (int k = 0; k < 3; ++k)
+      for (int j = 0; j < 3; ++j) c[k][j] = mesh.V(mesh.F(f, k), j);
+    const int first = static_cast<int>(std::min_element(c.begin(), c.end()) - c.begin());
+    std::array<double, 9> t;
+    for (int k = 0; k < 3; ++k)
+      for (int j = 0; j < 3; ++j) t[3 * k + j] = c[(first + k) % 3][j];
+    out.push_back(t);
+  }
+  std::sort(out.begin(), out.end());
+  return out;
+}
+
+double signed_volume(const Mesh& mesh) {
+  double volume = 0.0;
+  for (int f = 0; f < mesh.face_count(); ++f) {
+    const Vec3 a = mesh.V.row(mesh.F(f, 0)), b = mesh.V.row(mesh.F(f, 1)), c = mesh.V.row(mesh.F(f, 2));
+    volume += a.dot(b.cross(c)) / 6.0;
+  }
+  return volume;
+}
+
+class ReadMesh : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+    dir_ = fs::temp_directory_path() /
+           ("flank_read_mesh_" + std::to_string(::getpid()) + "_" + info->name());
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+
+  std::string write(const std::string& name, const std::string& content) {
+    const fs::path path = dir_ / name;
+    std::ofstream(path, std::ios::binary) << content;
+    return path.string();
+  }
+
+  // Reads `content` as file `name`; expects io::Error whose single-line message starts with
+  // the path and contains `word`.
+  void expect_error(const std::string& name, const std::string& content, const std::string& word) {
+    const std::string path = write(name, content);
+    try {
+      read_mesh(path);
+      ADD_FAILURE() << name << ": no error, expected '" << word << "'";
+    } catch (const Error& e) {
+      const std::string message = e.what();
+      EXPECT_EQ(message.rfind(path + ": ", 0), 0u) << message;
+      EXPECT_NE(message.find(word), std::string::npos) << message;
+      EXPECT_EQ(message.find('\n'), std::string::npos) << message;
+    }
+  }
+
+  // Reads every prefix of `content`: io::Error or a valid mesh, nothing else.
+  void read_every_prefix(const std::string& name, const std::string& content) {
+    for (std::size_t n = 0; n <= content.size(); ++n) {
+      // A fresh name each time: truncating a file that holds data can force a synchronous
+      // flush (ext4 auto_da_alloc), which makes this loop crawl.
+      const std::string path = write(std::to_string(n) + "_" + name, content.substr(0, n));
+      try {
+        const LoadedMesh m = read_mesh(path);
+        EXPECT_GT(m.mesh.face_count(), 0);
+      } catch (const Error&) {
+      }
+      fs::remove(path);
+    }
+  }
+
+  fs::path dir_;
+};
+
+void expect_unit_cube(const LoadedMesh& m) {
+  EXPECT_EQ(m.mesh.vertex_count(), 8);
+  EXPECT_EQ(m.mesh.face_count(), 12);
+  EXPECT_EQ(m.report.components, 1);
+  EXPECT_EQ(m.report.boundary_edges, 0);
+  EXPECT_EQ(m.report.non_manifold_edges, 0);
+  EXPECT_EQ(m.report.flipped_faces, 0);
+  EXPECT_EQ(m.report.degenerate_faces, 0);
+  EXPECT_TRUE(m.report.orientable);
+  EXPECT_NEAR(signed_volume(m.mesh), 1.0, 1e-12);  // outward, as in the files
+}
+
+TEST_F(ReadMesh, EveryFormatReadsTheSameCube) {
+  const LoadedMesh stl_ascii = read_mesh(kData + "/cube_ascii.stl");
+  const LoadedMesh stl_binary = read_mesh(write("cube.stl", cube_binary_stl()));
+  const LoadedMesh obj = read_mesh(kData + "/cube_quads.obj");
+  const LoadedMesh ply_ascii = read_mesh(kData + "/cube_ascii.ply");
+  const LoadedMesh ply_binary = read_mesh(write("cube.ply", cube_binary_ply()));
+  EXPECT_EQ(stl_ascii.report.format, "stl-ascii");
+  EXPECT_EQ(stl_binary.report.format, "stl-binary");
+  EXPECT_EQ(obj.report.format, "obj");
+  EXPECT_EQ(ply_ascii.report.format, "ply-ascii");
+  EXPECT_EQ(ply_binary.report.format, "ply-binary");
+  const auto reference = canonical(obj.mesh);
+  for (const LoadedMesh* m : {&stl_ascii, &stl_binary, &obj, &ply_ascii, &ply_binary}) {
+    SCOPED_TRACE(m->report.format);
+    expect_unit_cube(*m);
+    EXPECT_EQ(m->report.input_faces, 12);
+    EXPECT_EQ(canonical(m->mesh), reference);
+  }
+  // Clean indexed formats keep the file's numbering.
+  for (int i = 0; i < 8; ++i) EXPECT_EQ(Vec3(obj.mesh.V.row(i)), cube_vertex(i));
+  EXPECT_EQ(obj.report.input_vertices, 8);
+  EXPECT_EQ(ply_binary.report.welded_vertices, 0);
+}
+
+TEST_F(ReadMesh, FormatIsDetectedByContent) {
+  // Extension-less or misnamed files: PLY by magic, ASCII and binary STL by content.
+  std::ifstream in(kData + "/cube_ascii.stl");
+  std::stringstream ascii;
+  ascii << in.rdbuf();
+  expect_unit_cube(read_mesh(write("cube_ascii.mesh", ascii.str())));
+  expect_unit_cube(read_mesh(write("cube_binary", cube_binary_stl())));
+  expect_unit_cube(read_mesh(write("cube.stl", cube_binary_ply())));
+  expect_unit_cube(read_mesh(write("CUBE.OBJ", "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\n"
+                                               "v 0 0 1\nv 1 0 1\nv 1 1 1\nv 0 1 1\n"
+                                               "f 1 4 3 2\nf 5 6 7 8\nf 1 2 6 5\n"
+                                               "f 4 8 7 3\nf 1 5 8 4\nf 2 3 7 6\n")));
+}
+
+TEST_F(ReadMesh, StlIsWelded) {
+  const LoadedMesh m = read_mesh(kData + "/cube_ascii.stl");
+  EXPECT_EQ(m.report.input_vertices, 36);
+  EXPECT_EQ(m.report.welded_vertices, 28);
+  EXPECT_EQ(m.report.unused_vertices, 0);
+  // Duplicated vertices in an indexed format are welded too (-0 equals +0).
+  const LoadedMesh obj = read_mesh(
+      write("dup.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 1 -0 0\nv 1 1 0\nf 1 2 3\nf 4 5 3\n"));
+  EXPECT_EQ(obj.report.welded_vertices, 1);
+  EXPECT_EQ(obj.mesh.vertex_count(), 4);
+  EXPECT_EQ(obj.report.boundary_edges, 4);
+  EXPECT_EQ(obj.report.components, 1);
+}
+
+TEST_F(ReadMesh, DegenerateFacesAndUnusedVerticesAreDropped) {
+  // A square (two triangles), a zero-area face through midpoint 5, a repeated-index face and
+  // vertex 6 that no face uses.
+  const LoadedMesh m = read_mesh(write("degenerate.obj",
+                                       "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0.5 0 0\nv 9 9 9\n"
+                                       "f 1 2 3\nf 1 3 4\nf 1 5 2\nf 3 3 4\n"));
+  EXPECT_EQ(m.report.input_faces, 4);
+  EXPECT_EQ(m.report.degenerate_faces, 2);
+  EXPECT_EQ(m.report.unused_vertices, 2);
+  EXPECT_EQ(m.mesh.face_count(), 2);
+  EXPECT_EQ(m.mesh.vertex_count(), 4);
+  EXPECT_TRUE(m.mesh.F.maxCoeff() < 4 && m.mesh.F.minCoeff() >= 0);
+}
+
+// An n × n grid of unit squares in z = 0, normals +z; the triangles of the columns with
+// x ≥ flip_from are written reversed.
+std::string grid_obj(int n, int flip_from) {
+  std::string s;
+  for (int j = 0; j <= n; ++j)
+    for (int i = 0; i <= n; ++i) s += "v " + std::to_string(i) + " " + std::to_string(j) + " 0\n";
+  const auto id = [n](int i, int j) { return std::to_string(j * (n + 1) + i + 1); };
+  for (int j = 0; j < n; ++j)
+    for (int i = 0; i < n; ++i) {
+      const std::string a = id(i, j), b = id(i + 1, j), c = id(i + 1, j + 1), d = id(i, j + 1);
+      if (i >= flip_from)
+        s += "f " + a + " " + c + " " + b + "\nf " + a + " " + d + " " + c + "\n";
+      else
+        s += "f " + a + " " + b + " " + c + "\nf " + a + " " + c + " " + d + "\n";
+    }
+  return s;
+}
+
+double min_normal_z(const Mesh& m) { return face_normals(m).col(2).minCoeff(); }
+double max_normal_z(const Mesh& m) { return face_normals(m).col(2).maxCoeff(); }
+
+TEST_F(ReadMesh, OrientationIsMadeConsistent) {
+  // 2 of 8 columns reversed: 32 faces flipped back to the majority (+z).
+  const LoadedMesh m = read_mesh(write("grid.obj", grid_obj(8, 6)));
+  EXPECT_EQ(m.report.flipped_faces, 32);
+  EXPECT_TRUE(m.report.orientable);
+  EXPECT_EQ(m.report.components, 1);
+  EXPECT_EQ(m.report.boundary_edges, 32);
+  EXPECT_DOUBLE_EQ(min_normal_z(m.mesh), 1.0);
+
+  // 6 of 8 columns reversed: the majority of the area now says −z, so the other 32 flip.
+  const LoadedMesh majority = read_mesh(write("grid_majority.obj", grid_obj(8, 2)));
+  EXPECT_EQ(majority.report.flipped_faces, 32);
+  EXPECT_DOUBLE_EQ(max_normal_z(majority.mesh), -1.0);
+}
+
+TEST_F(ReadMesh, FlipReversesEverythingAfterRepair) {
+  ReadOptions options;
+  options.flip = true;
+  const LoadedMesh m = read_mesh(write("grid.obj", grid_obj(8, 6)), options);
+  EXPECT_EQ(m.report.flipped_faces, 32);
+  EXPECT_DOUBLE_EQ(max_normal_z(m.mesh), -1.0);
+  const LoadedMesh cube = read_mesh(kData + "/cube_quads.obj", options);
+  EXPECT_NEAR(signed_volume(cube.mesh), -1.0, 1e-12);
+}
+
+TEST_F(ReadMesh, TopologyIsReported) {
+  // A Möbius strip cannot be oriented; the reader says so and still returns it.
+  const int n = 12;
+  std::string s;
+  for (int i = 0; i < n; ++i) {
+    const double u = 2 * std::numbers::pi * i / n;
+    for (double w : {-0.3, 0.3}) {
+      const double r = 1 + w * std::cos(u / 2);
+      s += "v " + std::to_string(r * std::cos(u)) + " " + std::to_string(r * std::sin(u)) + " " +
+           std::to_string(w * std::sin(u / 2)) + "\n";
+    }
+  }
+  for (int i = 0; i < n; ++i) {
+    const int a = 2 * i + 1, b = 2 * i + 2;
+    // After a full turn the strip comes back with its two sides exchanged.
+    const int a1 = i + 1 < n ? a + 2 : 2, b1 = i + 1 < n ? b + 2 : 1;
+    s += "f " + std::to_string(a) + " " + std::to_string(a1) + " " + std::to_string(b1) + " " +
+         std::to_string(b) + "\n";
+  }
+  const LoadedMesh mobius = read_mesh(write("mobius.obj", s));
+  EXPECT_FALSE(mobius.report.orientable);
+  EXPECT_EQ(mobius.report.components, 1);
+  EXPECT_EQ(mobius.mesh.face_count(), 2 * n);
+
+  // Three triangles on one edge, plus a separate triangle.
+  const LoadedMesh fan = read_mesh(write("fan.obj",
+                                         "v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 -1 0\nv 0 0 1\n"
+                                         "v 5 5 5\nv 6 5 5\nv 5 6 5\n"
+                                         "f 1 2 3\nf 2 1 4\nf 1 2 5\nf 6 7 8\n"));
+  EXPECT_EQ(fan.report.non_manifold_edges, 1);
+  EXPECT_EQ(fan.report.components, 2);
+  EXPECT_EQ(fan.report.boundary_edges, 6 + 3);
+}
+
+TEST_F(ReadMesh, BadInputThrowsOneLineNamingTheFile) {
+  std::string truncated = cube_binary_stl(1000);
+  expect_error("truncated.stl", truncated, "truncated");
+  expect_error("short.stl", "solid\x01\x02", "truncated");
+  expect_error("open_facet.stl", "solid x\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\n", "truncated");
+  expect_error("header.ply", "ply\nformat ascii 1.0\nelement vertex 3\n", "truncated");
+  std::string ply = cube_binary_ply();
+  expect_error("body.ply", ply.substr(0, ply.size() - 5), "truncated");
+  expect_error("ascii_body.ply",
+               "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+               "property float z\nend_header\n0 0 0\n1 0\n",
+               "truncated");
+
+  expect_error("nan.obj", "v 0 0 0\nv nan 0 0\nv 0 1 0\nf 1 2 3\n", "non-finite");
+  expect_error("overflow.obj", "v 0 0 0\nv 1e999 0 0\nv 0 1 0\nf 1 2 3\n", "non-finite");
+  std::string inf = cube_binary_stl();
+  inf.replace(84 + 12, 4, std::string("\x00\x00\x80\x7f", 4));  // +inf as float32
+  expect_error("inf.stl", inf, "non-finite");
+  expect_error("nan.ply",
+               "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+               "property float z\nelement face 1\nproperty list uchar int vertex_indices\n"
+               "end_header\n0 0 0\n1 0 inf\n0 1 0\n3 0 1 2\n",
+               "non-finite");
+
+  expect_error("range.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 99\n", "references vertex 99");
+  expect_error("relative.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf -1 -2 -4\n", "references vertex");
+  expect_error("range.ply",
+               "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nproperty float y\n"
+               "property float z\nelement face 1\nproperty list uchar int vertex_indices\n"
+               "end_header\n0 0 0\n1 0 0\n0 1 0\n3 0 1 3\n",
+               "references vertex 3");
+
+  expect_error("points.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\n", "no triangles");
+  expect_error("nofaces.ply",
+               "ply\nformat ascii 1.0\nelement vertex 1\nproperty float x\nproperty float y\n"
+               "property float z\nend_header\n0 0 0\n",
+               "no triangles");
+  expect_error("empty.stl", "", "empty");
+  expect_error("comments.obj", "# nothing here\n", "empty");
+  std::string zero = cube_binary_stl(0);
+  expect_error("zero.stl", zero.substr(0, 84), "no triangles");
+
+  expect_error("flat.obj", "v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\nf 3 2 1\n",
+               "all 2 triangles are degenerate");
+  expect_error("same.stl", "solid s\nfacet normal 0 0 0\nouter loop\nvertex 1 1 1\nvertex 1 1 1\n"
+                           "vertex 1 1 1\nendloop\nendfacet\nendsolid s\n",
+               "degenerate");
+
+  expect_error("big.ply", "ply\nformat binary_big_endian 1.0\nelement vertex 0\nend_header\n",
+               "unsupported");
+  expect_error("notes.txt", "hello, this is not a mesh\n", "unsupported");
+  expect_error("fake.ply", "solid x\n", "PLY");
+  expect_error("bad.obj", "v 0 0 zero\n", "malformed");
+  expect_error("bad.stl", "solid x\nfacet normal 0 0 1\nbanana\n", "unexpected");
+
+  const std::string missing = (dir_ / "missing.stl").string();
+  try {
+    read_mesh(missing);
+    ADD_FAILURE();
+  } catch (const Error& e) {
+    EXPECT_EQ(std::string(e.what()), missing + ": cannot open (No such file or directory)");
+  }
+  try {
+    read_mesh(dir_.string());
+    ADD_FAILURE();
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("cannot open"), std::string::npos);
+  }
+}
+
+TEST_F(ReadMesh, EveryPrefixThrowsOrReads) {
+  read_every_prefix("prefix.stl", cube_binary_stl());
+  read_every_prefix("prefix.ply", cube_binary_ply());
+  for (const char* name : {"cube_ascii.stl", "cube_quads.obj", "cube_ascii.ply"}) {
+    std::ifstream in(kData + "/" + name, std::ios::binary);
+    std::stringstream content;
+    content << in.rdbuf();
+    read_every_prefix(std::string("prefix_") + name, content.str());
+  }
+}
+
+TEST_F(ReadMesh, GarbageNeverCrashes) {
+  std::mt19937 rng(12345);
+  std::uniform_int_distribution<int> byte(0, 255);
+  const std::vector<std::string> valid = {cube_binary_stl(), cube_binary_ply()};
+  for (int trial = 0; trial < 300; ++trial) {
+    // Random bytes, then valid files with random bytes overwritten.
+    std::string data(static_cast<std::size_t>(trial * 7 % 900), '\0');
+    for (char& c : data) c = static_cast<char>(byte(rng));
+    if (trial % 3 == 0) {
+      data = valid[trial % 2];
+      for (int k = 0; k < 4; ++k) data[rng() % data.size()] = static_cast<char>(byte(rng));
+    }
+    for (const char* ext : {".stl", ".ply", ".obj", ".bin"}) {
+      const std::string path = write(std::to_string(trial) + "_garbage" + ext, data);
+      try {
+        read_mesh(path);
+      } catch (const Error&) {
+      }
+      fs::remove(path);
+    }
+  }
+}
+
+TEST_F(ReadMesh, ShippedDataReadsCleanly) {
+  const LoadedMesh blade = read_mesh(kData + "/../../data/propeller_blade_upper.stl");
+  EXPECT_EQ(blade.report.format, "stl-ascii");
+  EXPECT_EQ(blade.mesh.vertex_count(), 291);
+  EXPECT_EQ(blade.mesh.face_count(), 522);
+  EXPECT_EQ(blade.report.degenerate_faces, 0);
+  EXPECT_EQ(blade.report.flipped_faces, 0);
+  EXPECT_EQ(blade.report.non_manifold_edges, 0);
+  EXPECT_EQ(blade.report.components, 1);
+  EXPECT_TRUE(blade.report.orientable);
+  EXPECT_GT(blade.report.boundary_edges, 0);  // an open face of the blade
+
+  const LoadedMesh hypar = read_mesh(kData + "/../../data/hyperbolic_paraboloid.obj");
+  EXPECT_EQ(hypar.report.format, "obj");
+  EXPECT_EQ(hypar.mesh.vertex_count(), 81);
+  EXPECT_EQ(hypar.mesh.face_count(), 128);
+  EXPECT_EQ(hypar.report.welded_vertices, 0);
+  EXPECT_EQ(hypar.report.flipped_faces, 0);
+  EXPECT_EQ(hypar.report.boundary_edges, 32);
+  EXPECT_EQ(hypar.report.components, 1);
+  EXPECT_TRUE(hypar.report.orientable);
+}
+
+}  // namespace
+}  // namespace flank::io

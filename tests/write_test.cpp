@@ -1,0 +1,356 @@
+// io writers: meshes round-trip through read_mesh, patches.json keeps its keys in order and is
+// byte-deterministic, PLY colours follow the maps, APT has one GOTO per step, and writes are
+// atomic.
+#include "io/write.h"
+
+#include <gtest/gtest.h>
+#include <unistd.h>
+
+#include <cmath>
+#include <cstdint>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <initializer_list>
+#include <limits>
+#include <sstream>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "io/read_mesh.h"
+#include "kernels/cutter.h"
+#include "solver/motion.h"
+
+namespace flank::io {
+namespace {
+
+namespace fs = std::filesystem;
+
+const std::string kData = FLANK_TEST_DATA_DIR;
+
+std::string slurp(const fs::path& path) {
+  std::ifstream in(path, std::ios::binary);
+  std::stringstream s;
+  s << in.rdbuf();
+  return s.str();
+}
+
+int count_of(const std::string& text, const std::string& what) {
+  int n = 0;
+  for (std::size_t pos = text.find(what); pos != std::string::npos; pos = text.find(what, pos + 1))
+    ++n;
+  return n;
+}
+
+// Each of `keys` occurs after the previous one, starting at `from`; returns the last position.
+std::size_t expect_in_order(const std::string& text, std::initializer_list<std::string> keys,
+                            std::size_t from = 0) {
+  for (const std::string& key : keys) {
+    const std::size_t pos = text.find("\"" + key + "\":", from);
+    EXPECT_NE(pos, std::string::npos) << "missing or out of order: " << key;
+    if (pos == std::string::npos) return from;
+    from = pos + 1;
+  }
+  return from;
+}
+
+// A 5 × 4 grid over a saddle with coordinates that are not short decimals.
+Mesh saddle() {
+  Mesh m;
+  const int nx = 5, ny = 4;
+  m.V.resize(nx * ny, 3);
+  for (int j = 0; j < ny; ++j)
+    for (int i = 0; i < nx; ++i) {
+      const double x = i / 3.0, y = j * 0.1 + 1e-9;
+      m.V.row(j * nx + i) << x, y, x * y - std::sqrt(2.0);
+    }
+  m.F.resize(2 * (nx - 1) * (ny - 1), 3);
+  int f = 0;
+  for (int j = 0; j + 1 < ny; ++j)
+    for (int i = 0; i + 1 < nx; ++i) {
+      const int a = j * nx + i, b = a + 1, c = a + nx + 1, d = a + nx;
+      m.F.row(f++) << a, b, c;
+      m.F.row(f++) << a, c, d;
+    }
+  return m;
+}
+
+Patch make_patch(int id, char tip, double x0) {
+  Patch p;
+  p.id = id;
+  p.tip = tip;
+  std::vector<Line> lines;
+  for (int i = 0; i <= 10; ++i) lines.push_back({Vec3(x0 + i, 0, 0), Vec3(x0 + i, 0, 50)});
+  p.motion = Motion::fit(lines, 4);
+  p.cutter = cone_from_end_radii(50.0, 4.0, 7.0);
+  p.error = {0.01, 0.005, 0.002, 1e-4};
+  p.covered_area = 12.5;
+  p.coverage_fraction = 0.25;
+  p.envelope.V.resize(4, 3);
+  p.envelope.V << x0, 0, 0, x0 + 1, 0, 0, x0 + 1, 1, 0, x0, 1, 0;
+  p.envelope.F.resize(2, 3);
+  p.envelope.F << 0, 1, 2, 0, 2, 3;
+  p.envelope.error.resize(4);
+  p.envelope.error << -0.2, -0.05, 0.0, 0.1;
+  p.envelope.rows = p.envelope.cols = 2;
+  return p;
+}
+
+class Write : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    const auto* info = ::testing::UnitTest::GetInstance()->current_test_info();
+    dir_ = fs::temp_directory_path() /
+           ("flank_write_" + std::to_string(::getpid()) + "_" + info->name());
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+
+  int entries() const {
+    int n = 0;
+    for ([[maybe_unused]] const auto& e : fs::directory_iterator(dir_)) ++n;
+    return n;
+  }
+
+  fs::path dir_;
+};
+
+TEST_F(Write, MeshRoundTripsInAllFormats) {
+  const Mesh m = saddle();
+  for (const char* name : {"saddle.obj", "saddle.ply"}) {  // exact: shortest text / doubles
+    SCOPED_TRACE(name);
+    write_mesh(dir_ / name, m);
+    const LoadedMesh back = read_mesh((dir_ / name).string());
+    EXPECT_EQ(back.mesh.V, m.V);
+    EXPECT_EQ(back.mesh.F, m.F);
+    EXPECT_EQ(back.report.flipped_faces, 0);
+  }
+  write_mesh(dir_ / "saddle.stl", m);  // float32: same topology, coordinates to float precision
+  const LoadedMesh stl = read_mesh((dir_ / "saddle.stl").string());
+  EXPECT_EQ(stl.report.format, "stl-binary");
+  EXPECT_EQ(stl.mesh.vertex_count(), m.vertex_count());
+  EXPECT_EQ(stl.mesh.face_count(), m.face_count());
+  EXPECT_EQ(stl.report.flipped_faces, 0);
+  EXPECT_NEAR(total_area(stl.mesh), total_area(m), 1e-5);
+  EXPECT_NEAR(face_normals(stl.mesh).col(2).sum(), face_normals(m).col(2).sum(), 1e-5);
+  EXPECT_EQ(entries(), 3);  // no temporaries left behind
+
+  const Mesh cube = read_mesh(kData + "/cube_quads.obj").mesh;
+  write_mesh(dir_ / "cube.STL", cube);
+  const Mesh cube_back = read_mesh((dir_ / "cube.STL").string()).mesh;
+  ASSERT_EQ(cube_back.face_count(), cube.face_count());
+  for (int f = 0; f < cube.face_count(); ++f)  // faces and corners keep their order
+    for (int k = 0; k < 3; ++k)
+      EXPECT_EQ(Vec3(cube_back.V.row(cube_back.F(f, k))), Vec3(cube.V.row(cube.F(f, k))));
+}
+
+TEST_F(Write, BadDestinationThrows) {
+  const Mesh m = saddle();
+  try {
+    write_mesh(dir_ / "mesh.xyz", m);
+    ADD_FAILURE();
+  } catch (const Error& e) {
+    EXPECT_NE(std::string(e.what()).find("unsupported"), std::string::npos) << e.what();
+  }
+  const fs::path missing = dir_ / "no_such_folder" / "mesh.stl";
+  try {
+    write_mesh(missing, m);
+    ADD_FAILURE();
+  } catch (const Error& e) {
+    EXPECT_EQ(std::string(e.what()).rfind(missing.string() + ": ", 0), 0u) << e.what();
+  }
+  EXPECT_THROW(write_patches_json(missing.parent_path() / "patches.json", {}, {}), Error);
+  EXPECT_EQ(entries(), 0);
+}
+
+TEST_F(Write, AtomicWriteLeavesOldFileWhenFillThrows) {
+  const fs::path path = dir_ / "out.txt";
+  write_file_atomic(path, [](std::ostream& out) { out << "old"; });
+  EXPECT_EQ(slurp(path), "old");
+  EXPECT_THROW(write_file_atomic(path,
+                                 [](std::ostream& out) {
+                                   out << "half of the new content";
+                                   throw std::runtime_error("solver failed");
+                                 }),
+               std::runtime_error);
+  EXPECT_EQ(slurp(path), "old");
+  EXPECT_EQ(entries(), 1);
+  write_file_atomic(path, [](std::ostream& out) { out << "new"; });
+  EXPECT_EQ(slurp(path), "new");
+  EXPECT_EQ(entries(), 1);
+}
+
+TEST_F(Write, PatchesJsonHasTheFormat) {
+  RunInfo run;
+  run.input_path = "parts/blade.stl";
+  run.vertices = 291;
+  run.triangles = 522;
+  run.bbox_diagonal = 120.5;
+  run.settings = {{"tolerance", 0.05},
+                  {"tool", std::string("cone")},
+                  {"threads", 2LL},
+                  {"flip", false},
+                  {"radius", std::vector<double>{2.0, 8.0}}};
+  run.coverage_fraction = 0.75;
+  run.tolerance = 0.05;
+  run.uncovered_area = std::numeric_limits<double>::quiet_NaN();
+  run.timing_s = {{"index", 0.1}, {"candidates", 0.2}, {"fit", 0.3}, {"cover", 0.01}, {"total", 0.7}};
+  std::vector<Patch> patches = {make_patch(0, 'a', 0.0), make_patch(1, 'b', 20.0)};
+  patches[1].collision.checked = true;
+  patches[1].collision.min_clearance = 1.5;
+  patches[1].collision.holder_length = 30.0;
+  patches[1].collision.holder_radius = 10.0;
+  patches[1].error.rms = std::numeric_limits<double>::infinity();
+
+  const fs::path path = dir_ / "patches.json";
+  write_patches_json(path, run, patches);
+  const std::string text = slurp(path);
+  EXPECT_EQ(text.rfind("{", 0), 0u);
+  std::size_t at = expect_in_order(text, {"format", "units", "input", "path", "vertices", "triangles",
+                                          "bbox_diagonal", "settings", "tolerance", "tool",
+                                          "threads", "flip", "radius", "coverage", "fraction",
+                                          "tolerance", "uncovered_area", "timing_s", "index",
+                                          "candidates", "fit", "cover", "total", "patches"});
+  for (int id = 0; id < 2; ++id)
+    at = expect_in_order(text, {"id", "tool", "kind", "length", "radii", "s", "d", "coefficients",
+                                "profile", "motion", "degree", "knots", "a", "b", "tip", "error",
+                                "max", "rms", "max_gouge", "max_relative", "coverage", "area",
+                                "fraction", "collision", "holder_clear", "min_clearance", "holder"},
+                         at);
+  EXPECT_NE(text.find("\"format\": \"flank-patches/1\""), std::string::npos);
+  EXPECT_NE(text.find("\"units\": \"mm\""), std::string::npos);
+  EXPECT_NE(text.find("\"kind\": \"cone\""), std::string::npos);
+  EXPECT_NE(text.find("\"uncovered_area\": null"), std::string::npos);  // NaN
+  EXPECT_NE(text.find("\"rms\": null"), std::string::npos);             // inf
+  EXPECT_NE(text.find("\"min_clearance\": null"), std::string::npos);   // not checked
+  EXPECT_NE(text.find("\"holder\": null"), std::string::npos);
+  EXPECT_NE(text.find("\"min_clearance\": 1.5"), std::string::npos);
+  EXPECT_NE(text.find("\"tip\": \"b\""), std::string::npos);
+  EXPECT_EQ(text.find("nan"), std::string::npos);
+  EXPECT_EQ(text.find("inf"), std::string::npos);
+
+  // 101 uniform radius samples, and as many d values and profile points.
+  const std::size_t s_open = text.find("\"s\": [");
+  const std::size_t s_close = text.find(']', s_open);
+  ASSERT_NE(s_close, std::string::npos);
+  const std::string s_array = text.substr(s_open, s_close - s_open);
+  EXPECT_EQ(count_of(s_array, ","), 100);
+  EXPECT_NE(s_array.find("0.5,"), std::string::npos);
+  const std::size_t d_open = text.find("\"d\": [", s_close);
+  EXPECT_EQ(count_of(text.substr(d_open, text.find(']', d_open) - d_open), ","), 100);
+
+  // Byte-deterministic.
+  write_patches_json(dir_ / "again.json", run, patches);
+  EXPECT_EQ(slurp(dir_ / "again.json"), text);
+}
+
+TEST_F(Write, PatchesJsonRejectsBrokenCutter) {
+  std::vector<Patch> patches = {make_patch(3, 'a', 0.0)};
+  patches[0].cutter.coeffs.resize(1);
+  EXPECT_THROW(write_patches_json(dir_ / "patches.json", {}, patches), Error);
+  EXPECT_EQ(entries(), 0);
+}
+
+TEST_F(Write, EnvelopesPlyCarriesErrorAndColour) {
+  const std::vector<Patch> patches = {make_patch(0, 'a', 0.0), make_patch(7, 'a', 5.0)};
+  const fs::path path = dir_ / "envelopes.ply";
+  write_envelopes_ply(path, patches, 0.1);
+  const LoadedMesh back = read_mesh(path.string());
+  EXPECT_EQ(back.report.format, "ply-binary");
+  EXPECT_EQ(back.mesh.vertex_count(), 8);
+  EXPECT_EQ(back.mesh.face_count(), 4);
+  EXPECT_EQ(back.report.components, 2);
+
+  const std::string text = slurp(path);
+  EXPECT_NE(text.find("property float error\n"), std::string::npos);
+  EXPECT_NE(text.find("property int patch\n"), std::string::npos);
+  const std::size_t body = text.find("end_header\n") + 11;
+  const std::size_t stride = 4 * 4 + 3 + 4;
+  const unsigned char expected[4][3] = {{255, 0, 0}, {255, 128, 128}, {255, 255, 255}, {0, 0, 255}};
+  for (int v = 0; v < 8; ++v) {
+    const std::size_t at = body + v * stride;
+    float e;
+    std::memcpy(&e, text.data() + at + 12, 4);
+    EXPECT_FLOAT_EQ(e, static_cast<float>(patches[v / 4].envelope.error(v % 4)));
+    for (int k = 0; k < 3; ++k)
+      EXPECT_EQ(static_cast<unsigned char>(text[at + 16 + k]), expected[v % 4][k]) << v;
+    std::int32_t id;
+    std::memcpy(&id, text.data() + at + 19, 4);
+    EXPECT_EQ(id, patches[v / 4].id);
+  }
+  EXPECT_EQ(text.size(), body + 8 * stride + 4 * 13);
+}
+
+TEST_F(Write, DesignPlyColoursPatches) {
+  const Mesh m = saddle();
+  std::vector<int> vertex_patch(m.vertex_count(), 0);
+  vertex_patch[1] = -1;
+  vertex_patch[2] = 4;
+  const fs::path path = dir_ / "design.ply";
+  write_design_ply(path, m, vertex_patch);
+  const LoadedMesh back = read_mesh(path.string());
+  EXPECT_EQ(back.mesh.vertex_count(), m.vertex_count());
+  EXPECT_EQ(back.mesh.F, m.F);
+  const std::string text = slurp(path);
+  const std::size_t body = text.find("end_header\n") + 11;
+  const std::size_t stride = 3 * 4 + 3 + 4;
+  const auto rgb = [&](int v) {
+    const std::size_t at = body + v * stride + 12;
+    return std::vector<int>{static_cast<unsigned char>(text[at]),
+                            static_cast<unsigned char>(text[at + 1]),
+                            static_cast<unsigned char>(text[at + 2])};
+  };
+  EXPECT_EQ(rgb(1), (std::vector<int>{255, 0, 255}));
+  EXPECT_EQ(rgb(0), rgb(3));
+  EXPECT_NE(rgb(0), rgb(2));
+  std::int32_t id;
+  std::memcpy(&id, text.data() + body + stride + 15, 4);
+  EXPECT_EQ(id, -1);
+
+  vertex_patch.pop_back();
+  EXPECT_THROW(write_design_ply(dir_ / "short.ply", m, vertex_patch), Error);
+  EXPECT_FALSE(fs::exists(dir_ / "short.ply"));
+}
+
+TEST_F(Write, ToolpathAptHasOneGotoPerStep) {
+  const std::vector<Patch> patches = {make_patch(0, 'a', 0.0), make_patch(1, 'b', 20.0)};
+  const fs::path path = dir_ / "toolpath.apt";
+  write_toolpath_apt(path, patches, 40, "BLADE");
+  const std::string text = slurp(path);
+  EXPECT_EQ(text.rfind("$$ flank toolpath", 0), 0u);
+  EXPECT_NE(text.find("\nPARTNO/BLADE\n"), std::string::npos);
+  EXPECT_NE(text.find("\nUNITS/MM\n"), std::string::npos);
+  EXPECT_EQ(count_of(text, "\nMULTAX/ON\n"), 2);
+  EXPECT_EQ(count_of(text, "\nGOTO/"), 2 * 41);
+  EXPECT_EQ(count_of(text, "FINI"), 1);
+  EXPECT_EQ(text.substr(text.size() - 5), "FINI\n");
+  // Tip a: from a(t) toward b(t); tip b: from b(t) toward a(t).
+  EXPECT_NE(text.find("\nGOTO/0.000000,0.000000,0.000000,0.000000,0.000000,1.000000\n"),
+            std::string::npos);
+  EXPECT_NE(text.find("\nGOTO/10.000000,0.000000,0.000000,0.000000,0.000000,1.000000\n"),
+            std::string::npos);
+  EXPECT_NE(text.find("\nGOTO/20.000000,0.000000,50.000000,0.000000,0.000000,-1.000000\n"),
+            std::string::npos);
+  double max_r = 0.0;
+  for (int i = 0; i <= 100; ++i) max_r = std::max(max_r, patches[0].cutter.meridian(i / 100.0)(1));
+  char cutter[128];
+  std::snprintf(cutter, sizeof cutter, "\nCUTTER/%.6f,0.000000,0.000000,0.000000,0.000000,0.000000,50.000000\n",
+                2 * max_r);
+  EXPECT_NE(text.find(cutter), std::string::npos);
+  EXPECT_EQ(text.find("-0.000000"), std::string::npos);
+
+  write_toolpath_apt(dir_ / "again.apt", patches, 40, "BLADE");
+  EXPECT_EQ(slurp(dir_ / "again.apt"), text);
+
+  EXPECT_THROW(write_toolpath_apt(dir_ / "zero.apt", patches, 0, "BLADE"), Error);
+  std::vector<Patch> broken = patches;
+  broken[1].motion = Motion();
+  EXPECT_THROW(write_toolpath_apt(dir_ / "broken.apt", broken, 10, "BLADE"), Error);
+  EXPECT_EQ(entries(), 2);
+}
+
+}  // namespace
+}  // namespace flank::io
