@@ -21,7 +21,7 @@ namespace {
 struct FitArgs {
   std::string mesh, line, lines_file, out_dir, tool = "cone", holder;
   std::optional<double> tolerance, tolerance_rel;
-  int threads = 0, control_points = 12, samples_t = 100, samples_s = 30, apt_steps = 200;
+  int threads = 0, control_points = 40, samples_t = 100, samples_s = 30, apt_steps = 200;
   bool flip = false, quiet = false;
 };
 
@@ -68,19 +68,14 @@ int run_fit(const FitArgs& a) {
   Motion init;
   std::vector<io::Setting> settings;
   if (user_line) {
-    RefineLineOptions rlo;
-    rlo.kind = kind;
-    const RefinedLine refined = refine_line(index, *user_line, rlo);
-    progress.stage("line-driven start: best of " + std::to_string(refined.evaluated) +
-                   " nearby lines has movability " + std::to_string(refined.movability.value));
-    if (!refined.movability.ok())
-      throw UsageError("the line has no usable footpoints on the surface (it is off the part)");
-    const Propagation prop = propagate(index, refined.line);
-    progress.stage("propagated " + std::to_string(prop.rulings.size()) + " rulings (stops: " +
-                   to_string(prop.stop_backward) + " / " + to_string(prop.stop_forward) + ")");
-    if (prop.rulings.size() < 4)
-      throw UsageError("the line cannot move along the surface: try another line or --lines");
-    init = Motion::fit(prop.rulings, a.control_points);
+    const LineStart start = line_driven_start(index, *user_line, kind, a.control_points);
+    progress.stage("line-driven start: best of " + std::to_string(start.refined.evaluated) +
+                   " nearby lines has movability " + std::to_string(start.refined.movability.value) +
+                   "; swept " + std::to_string(start.propagation.rulings.size()) + " rulings (stops: " +
+                   to_string(start.propagation.stop_backward) + " / " +
+                   to_string(start.propagation.stop_forward) + ")");
+    if (!start.ok) throw UsageError(start.message + ": try another line or --lines");
+    init = start.motion;
     const Line& l = *user_line;
     settings.push_back({"start", std::string("line")});
     settings.push_back({"line", std::vector<double>{l.a.x(), l.a.y(), l.a.z(), l.b.x(), l.b.y(), l.b.z()}});
@@ -185,7 +180,7 @@ void register_fit(CLI::App& app, int* exit_code) {
   cmd->add_option("--holder", a->holder,
                   "Check the holder: LEN,RADIUS of a cylinder beyond the cutter's spindle end, in mm");
   cmd->add_option("--threads", a->threads, "Worker threads (default: all cores)")->check(CLI::Range(1, 1024));
-  cmd->add_option("--control-points", a->control_points, "B-spline control points per axis end curve (default 12)")
+  cmd->add_option("--control-points", a->control_points, "B-spline control points per axis end curve (default 40)")
       ->check(CLI::Range(4, 200));
   cmd->add_option("--samples-t", a->samples_t, "Samples along the motion (default 100)")->check(CLI::Range(8, 100000));
   cmd->add_option("--samples-s", a->samples_s, "Samples along the axis (default 30)")->check(CLI::Range(4, 10000));

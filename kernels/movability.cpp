@@ -45,7 +45,7 @@ Movability movability_from_directions(const Vec3& a, const Vec3& b, std::span<co
   Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> ey(Ayy);
   // Directions of y that the footpoints barely see (sliding along a cylinder-like line,
   // where g·u is mesh noise) are treated as free and set to zero rather than amplified.
-  const double cutoff = 1e-4 * std::max(1e-300, A.trace());
+  const double cutoff = 1e-9 * std::max(1e-300, A.trace());
   Eigen::Matrix3d Ayy_pinv = Eigen::Matrix3d::Zero();
   for (int k = 0; k < 3; ++k) {
     const double lam = ey.eigenvalues()(k);
@@ -116,12 +116,10 @@ Movability movability(const SurfaceIndex& index, const Vec3& a, const Vec3& b,
     }
     out.profile_rms = ss.empty() ? 0.0 : std::sqrt(sq / static_cast<double>(ss.size()));
   }
-  if (out.status == MovabilityStatus::ok) {
-    if (boundary > options.max_boundary_fraction * n)
-      out.status = MovabilityStatus::left_surface;
-    else if (jump)
-      out.status = MovabilityStatus::jump;
-  }
+  if (boundary > options.max_boundary_fraction * n)
+    out.status = MovabilityStatus::left_surface;
+  else if (out.status == MovabilityStatus::ok && jump)
+    out.status = MovabilityStatus::jump;
   return out;
 }
 

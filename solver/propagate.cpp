@@ -156,6 +156,28 @@ Propagation propagate(const SurfaceIndex& index, const Line& start,
   return p;
 }
 
+LineStart line_driven_start(const SurfaceIndex& index, const Line& line,
+                            std::optional<CutterKind> kind, int control_points,
+                            const PropagateOptions& propagate_options) {
+  LineStart out;
+  RefineLineOptions ro;
+  ro.kind = kind;
+  ro.movability = propagate_options.movability;
+  out.refined = refine_line(index, line, ro);
+  if (!out.refined.movability.ok()) {
+    out.message = "the line has no usable footpoints on the surface (it is off the part)";
+    return out;
+  }
+  out.propagation = propagate(index, out.refined.line, propagate_options);
+  if (out.propagation.rulings.size() < kSplineDegree + 1) {
+    out.message = "the line cannot move along the surface";
+    return out;
+  }
+  out.motion = Motion::fit(out.propagation.rulings, control_points);
+  out.ok = true;
+  return out;
+}
+
 Motion motion_from_lines(const std::vector<Line>& lines, int control_points) {
   // The endpoints are the control polygons (§4.4) of cubic B-splines with as many control
   // points as lines; two or three lines are first spread evenly along their polyline.

@@ -58,6 +58,19 @@ struct Propagation {
 Propagation propagate(const SurfaceIndex& index, const Line& start,
                       const PropagateOptions& options = {});
 
+// Line-driven start (§4.2–4.3) in one call: refine the line for a cutter of `kind`,
+// propagate it both ways, and fit the swept rulings with `control_points` per curve.
+struct LineStart {
+  RefinedLine refined;
+  Propagation propagation;
+  Motion motion;
+  bool ok = false;
+  std::string message;  // why not, when !ok
+};
+LineStart line_driven_start(const SurfaceIndex& index, const Line& line,
+                            std::optional<CutterKind> kind, int control_points,
+                            const PropagateOptions& propagate_options = {});
+
 // Surface-driven start (§4.4): the endpoints of ordered lines are the control polygons of
 // a(t) and b(t); the result is resampled to `control_points` per curve.
 Motion motion_from_lines(const std::vector<Line>& lines, int control_points);

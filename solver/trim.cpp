@@ -41,7 +41,9 @@ TrimRange find_trim(const ErrorGrid& grid, double tolerance) {
       ++inside;
       if (std::abs(grid.at(i, j)) > tolerance) within = false;
     }
-    row_ok[i] = within && 2 * inside >= grid.cols;
+    // Samples beyond Φ's boundary are overhang, not error: a row goes only when it is out of
+    // tolerance or has nothing inside Φ at all.
+    row_ok[i] = within && inside > 0;
   }
   if (!longest_run(row_ok, &range.row0, &range.row1)) return range;
   std::vector<char> col_ok(static_cast<std::size_t>(grid.cols), 0);
@@ -53,7 +55,7 @@ TrimRange find_trim(const ErrorGrid& grid, double tolerance) {
       ++inside;
       if (std::abs(grid.at(i, j)) > tolerance) within = false;
     }
-    col_ok[j] = within && 2 * inside >= range.row1 - range.row0 + 1;
+    col_ok[j] = within && inside > 0;
   }
   if (!longest_run(col_ok, &range.col0, &range.col1)) return range;
   range.empty = false;

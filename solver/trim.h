@@ -18,8 +18,8 @@ struct TrimRange {
   }
 };
 
-// Longest run of rows whose samples are mostly inside Φ and within tolerance, then the
-// longest run of columns within it.
+// Longest run of rows whose samples inside Φ are all within tolerance (and that have some),
+// then the longest run of such columns within it.
 TrimRange find_trim(const ErrorGrid& grid, double tolerance);
 
 struct FitPatchOptions {
