@@ -9,7 +9,8 @@ namespace flank {
 double movability_sample(int i, int n) { return (i + 0.5) / n; }
 
 Movability movability_from_directions(const Vec3& a, const Vec3& b, std::span<const double> s,
-                                      PointsRef g, std::span<const double> weights) {
+                                      PointsRef g, std::span<const double> weights,
+                                      double null_cutoff) {
   Movability out;
   out.samples = static_cast<int>(s.size());
   const Vec3 ab = b - a;
@@ -43,9 +44,8 @@ Movability movability_from_directions(const Vec3& a, const Vec3& b, std::span<co
   const Eigen::Matrix<double, 2, 3> Amy = A.topRightCorner<2, 3>();
   const Eigen::Matrix3d Ayy = A.bottomRightCorner<3, 3>();
   Eigen::SelfAdjointEigenSolver<Eigen::Matrix3d> ey(Ayy);
-  // Directions of y that the footpoints barely see (sliding along a cylinder-like line,
-  // where g·u is mesh noise) are treated as free and set to zero rather than amplified.
-  const double cutoff = 1e-9 * std::max(1e-300, A.trace());
+  // Directions of y that the footpoints barely see are free: set to zero, not amplified.
+  const double cutoff = null_cutoff * std::max(1e-300, A.trace());
   Eigen::Matrix3d Ayy_pinv = Eigen::Matrix3d::Zero();
   for (int k = 0; k < 3; ++k) {
     const double lam = ey.eigenvalues()(k);
@@ -94,7 +94,7 @@ Movability movability(const SurfaceIndex& index, const Vec3& a, const Vec3& b,
       jump = true;
     if (static_cast<int>(hints.size()) == n) hints[i] = cp[i].face;
   }
-  Movability out = movability_from_directions(a, b, s, g, w);
+  Movability out = movability_from_directions(a, b, s, g, w, options.null_cutoff);
   out.boundary_samples = boundary;
   if (options.profile && out.status == MovabilityStatus::ok) {
     std::vector<double> ss, dd;

@@ -28,6 +28,10 @@ struct MovabilityOptions {
   // Also fit the footpoint distances with a cutter of this kind (the sphere radii the line
   // would need), reporting the misfit and the profile.
   std::optional<CutterKind> profile;
+  // Eigen-directions of A_yy below this fraction of trace(A) are treated as free and set to
+  // zero: 1e-9 keeps the exact answer on analytic data; propagation uses 1e-4 so that
+  // sliding along a cylinder-like line (g·u is mesh noise there) is not amplified into motion.
+  double null_cutoff = 1e-9;
 };
 
 struct Movability {
@@ -59,7 +63,8 @@ double movability_sample(int i, int n);
 // (#n by 3 `g`, n values `s`, optional 0/1 `weights`). Pure linear algebra, no mesh: this is
 // what the analytic tests feed with exact footpoints.
 Movability movability_from_directions(const Vec3& a, const Vec3& b, std::span<const double> s,
-                                      PointsRef g, std::span<const double> weights = {});
+                                      PointsRef g, std::span<const double> weights = {},
+                                      double null_cutoff = 1e-9);
 
 // Movability of line ab against Φ. `hints` (empty or options.samples faces) warm-starts the
 // closest-point queries and receives the new footpoint faces. Runs on the calling thread.

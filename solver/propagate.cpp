@@ -89,8 +89,10 @@ struct Stepper {
   bool velocity(const Line& l, const Vec3& reference, Vec3* va, Vec3* vb, Movability* mv) {
     *mv = movability(index, l.a, l.b, options.movability, hints);
     if (!std::isfinite(mv->value)) return false;
-    Vec3 vm = mv->velocity(0.5);
-    double sign = reference.squaredNorm() > 0 && vm.dot(reference) < 0 ? -1.0 : 1.0;
+    // The sweep is the part of v_m across the axis; sliding along it says nothing of the
+    // direction of travel.
+    const Vec3 sweep = mv->mu1 * mv->n1 + mv->mu2 * mv->n2;
+    double sign = reference.squaredNorm() > 0 && sweep.dot(reference) < 0 ? -1.0 : 1.0;
     *va = sign * mv->velocity(0.0);
     *vb = sign * mv->velocity(1.0);
     return true;
@@ -117,13 +119,15 @@ PropagateStop run(Stepper& st, const Line& start, const Vec3& initial_dir, doubl
     if (mv.value > st.options.max_movability) return PropagateStop::max_movability;
     *worst = std::max(*worst, mv.value);
     // RK2 (midpoint rule); the speed of the midpoint across the axis is 1, so h is a length.
-    const Vec3 vm1 = 0.5 * (va + vb);
+    const Vec3 u = (cur.b - cur.a).normalized();
+    const Vec3 vm1 = 0.5 * (va + vb) - u.dot(0.5 * (va + vb)) * u;
     const Line half = st.rigid({cur.a + 0.5 * h * va, cur.b + 0.5 * h * vb});
     Vec3 va2, vb2;
     Movability mv2;
     if (!st.velocity(half, vm1, &va2, &vb2, &mv2) || !mv2.ok()) return PropagateStop::left_surface;
     const Line next = st.rigid({cur.a + h * va2, cur.b + h * vb2});
     ref = 0.5 * (va2 + vb2);
+    ref -= u.dot(ref) * u;
     travel += (0.5 * (next.a + next.b) - 0.5 * (cur.a + cur.b)).norm();
     out->push_back(next);
     cur = next;
@@ -136,15 +140,17 @@ Propagation propagate(const SurfaceIndex& index, const Line& start,
   Propagation p;
   const double h = options.step > 0 ? options.step : 1e-3 * index.diagonal();
   const double cap = options.max_travel > 0 ? options.max_travel : 4.0 * index.diagonal();
-  Stepper st{index, options, std::vector<int>(static_cast<std::size_t>(options.movability.samples), -1),
+  PropagateOptions po = options;
+  po.movability.null_cutoff = std::max(po.movability.null_cutoff, 1e-4);
+  Stepper st{index, po, std::vector<int>(static_cast<std::size_t>(options.movability.samples), -1),
              start.length()};
-  Movability m0 = movability(index, start.a, start.b, options.movability, st.hints);
+  Movability m0 = movability(index, start.a, start.b, po.movability, st.hints);
   p.max_movability = m0.value;
   if (!m0.ok()) {
     p.rulings = {start};
     return p;
   }
-  const Vec3 dir = m0.velocity(0.5);
+  const Vec3 dir = m0.mu1 * m0.n1 + m0.mu2 * m0.n2;
   std::vector<Line> forward, backward;
   p.stop_forward = run(st, start, dir, h, cap, &forward, &p.max_movability);
   std::fill(st.hints.begin(), st.hints.end(), -1);
