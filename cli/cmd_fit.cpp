@@ -54,6 +54,7 @@ int run_fit(const FitArgs& a) {
   std::vector<Line> user_lines;
   if (!a.lines_file.empty()) user_lines = read_lines_file(a.lines_file);
 
+  resolve_tolerance(a.tolerance, a.tolerance_rel, 1.0);  // refuse bad values before any work
   ThreadLimit limit(a.threads);
   io::ReadOptions ro;
   ro.flip = a.flip;

@@ -1,0 +1,137 @@
+// The flank command line as a machinist meets it: bad input gets one line naming the file
+// and the problem, a non-zero exit, and no output file; a good run writes every output.
+#include <gtest/gtest.h>
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <array>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <string>
+
+namespace {
+
+namespace fs = std::filesystem;
+
+struct CliRun {
+  int code = -1;
+  std::string out, err;
+};
+
+CliRun run(const std::string& args) {
+  static int counter = 0;
+  const fs::path dir = fs::temp_directory_path() / ("flank_cli_" + std::to_string(::getpid()));
+  fs::create_directories(dir);
+  const fs::path out = dir / ("out" + std::to_string(counter));
+  const fs::path err = dir / ("err" + std::to_string(counter++));
+  const std::string cmd = std::string(FLANK_BINARY) + " " + args + " >" + out.string() + " 2>" + err.string();
+  CliRun r;
+  const int status = std::system(cmd.c_str());
+  r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  auto slurp = [](const fs::path& p) {
+    std::ifstream in(p);
+    return std::string(std::istreambuf_iterator<char>(in), {});
+  };
+  r.out = slurp(out);
+  r.err = slurp(err);
+  return r;
+}
+
+class Cli : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() / ("flank_cli_case_" + std::to_string(::getpid()) + "_" +
+                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::remove_all(dir_);
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  fs::path file(const std::string& name, const std::string& content) {
+    const fs::path p = dir_ / name;
+    std::ofstream(p, std::ios::binary) << content;
+    return p;
+  }
+  // One line on stderr naming `what`, exit code non-zero, and the output folder empty.
+  void expect_clean_failure(const CliRun& r, const std::string& what, const fs::path& outdir) {
+    EXPECT_NE(r.code, 0);
+    EXPECT_NE(r.err.find(what), std::string::npos) << r.err;
+    EXPECT_EQ(std::count(r.err.begin(), r.err.end(), '\n'), 1) << r.err;
+    EXPECT_TRUE(!fs::exists(outdir) || fs::is_empty(outdir)) << outdir;
+  }
+  fs::path dir_;
+};
+
+const char* kLine = "--line 33.75,33.75,-45,33.75,33.75,5";
+
+TEST_F(Cli, BadMeshesGiveOneLineAndNoOutput) {
+  const fs::path out = dir_ / "results";
+  const std::array<std::pair<std::string, std::string>, 6> cases{{
+      {"empty.stl", ""},
+      {"truncated.stl", std::string(80, 'x') + std::string("\x10\x00\x00\x00", 4) + std::string(60, '\0')},
+      {"nan.obj", "v 0 0 0\nv 1 0 nan\nv 0 1 0\nf 1 2 3\n"},
+      {"range.obj", "v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 9\n"},
+      {"degenerate.obj", "v 0 0 0\nv 1 0 0\nv 2 0 0\nf 1 2 3\n"},
+      {"garbage.ply", "ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nend_header\n1\n"},
+  }};
+  for (const auto& [name, content] : cases) {
+    const fs::path mesh = file(name, content);
+    expect_clean_failure(run("fit " + mesh.string() + " " + kLine + " -o " + out.string()), name, out);
+  }
+  expect_clean_failure(run("fit " + (dir_ / "missing.stl").string() + " " + kLine + " -o " + out.string()),
+                       "missing.stl", out);
+}
+
+TEST_F(Cli, ImpossibleOptionsAreRefused) {
+  const fs::path out = dir_ / "results";
+  const fs::path mesh = dir_ / "part.stl";
+  ASSERT_EQ(run("synth --guides seed003 --tool cylinder:5 --resolution 61x21 -o " + mesh.string()).code, 0);
+  expect_clean_failure(run("fit " + mesh.string() + " -o " + out.string()), "--line", out);
+  expect_clean_failure(run("fit " + mesh.string() + " " + kLine + " --tool ballnose -o " + out.string()), "ballnose", out);
+  expect_clean_failure(run("fit " + mesh.string() + " " + kLine + " --tolerance -1 -o " + out.string()), "tolerance", out);
+  expect_clean_failure(run("fit " + mesh.string() + " " + kLine + " --tolerance 0.1 --tolerance-rel 1e-4 -o " + out.string()),
+                       "tolerance", out);
+  expect_clean_failure(run("fit " + mesh.string() + " --line 1,2,3 -o " + out.string()), "--line", out);
+  expect_clean_failure(run("fit " + mesh.string() + " " + kLine + " --holder 10 -o " + out.string()), "--holder", out);
+  expect_clean_failure(run("synth --guides seed003 --tool cone:4 -o " + (dir_ / "x.stl").string()), "cone", out);
+  EXPECT_FALSE(fs::exists(dir_ / "x.stl"));
+  expect_clean_failure(run("fit " + mesh.string() + " --lines " + file("l.txt", "1 2 3 4 5 6\n").string() +
+                           " -o " + out.string()),
+                       "l.txt", out);
+}
+
+TEST_F(Cli, FitWritesEveryOutput) {
+  const fs::path mesh = dir_ / "part.stl";
+  ASSERT_EQ(run("synth --guides seed003 --tool cylinder:5 --resolution 121x31 -o " + mesh.string()).code, 0);
+  const fs::path out = dir_ / "results";
+  const CliRun r = run("fit " + mesh.string() + " " + kLine + " --tool cylinder --tolerance-rel 5e-4 --holder 30,8 -q -o " +
+                    out.string());
+  ASSERT_EQ(r.code, 0) << r.err;
+  for (const char* name : {"patches.json", "envelopes.ply", "design.ply", "toolpath.apt"})
+    EXPECT_GT(fs::file_size(out / name), 100u) << name;
+  std::ifstream json(out / "patches.json");
+  const std::string text(std::istreambuf_iterator<char>(json), {});
+  EXPECT_NE(text.find("\"flank-patches/1\""), std::string::npos);
+  EXPECT_NE(text.find("\"cylinder\""), std::string::npos);
+  std::ifstream apt(out / "toolpath.apt");
+  const std::string cl(std::istreambuf_iterator<char>(apt), {});
+  EXPECT_NE(cl.find("MULTAX"), std::string::npos);
+  EXPECT_NE(cl.find("GOTO/"), std::string::npos);
+  // Nothing temporary is left behind.
+  for (const auto& e : fs::directory_iterator(out)) EXPECT_EQ(e.path().filename().string().rfind(".tmp", 0), std::string::npos);
+  // info and movability speak too.
+  EXPECT_EQ(run("info " + mesh.string()).code, 0);
+  const CliRun m = run("movability " + mesh.string() + " " + kLine);
+  EXPECT_EQ(m.code, 0);
+  EXPECT_NE(m.out.find("movability"), std::string::npos);
+}
+
+TEST_F(Cli, HelpIsReadable) {
+  const CliRun r = run("fit --help");
+  EXPECT_EQ(r.code, 0);
+  EXPECT_NE(r.out.find("--tolerance"), std::string::npos);
+  EXPECT_NE(r.out.find("--holder"), std::string::npos);
+}
+
+}  // namespace
