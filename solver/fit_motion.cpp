@@ -380,6 +380,18 @@ FitResult fit_motion(const SurfaceIndex& index, const Motion& init_motion,
         ev = std::move(trial);
         lambda = std::max(lambda / 3.0, 1e-9);
         accepted = true;
+        // Near the optimum the footpoints slide with the axis and successive GN steps line up
+        // (linear convergence along the radius ↔ offset valley): extend the step while the
+        // cost keeps falling, each extension one batch of closest points.
+        for (int e = 0; e < options.max_extrapolations && !converged && !pb.fair_active; ++e) {
+          const VecX x_far = x + delta * static_cast<double>(1 << e);
+          std::vector<int> far_hints = hints;
+          Evaluation far = evaluate(pb, x_far, far_hints, result.timing);
+          if (!(far.cost < ev.cost) || far.interior < std::max(nc, n)) break;
+          x = x_far;
+          hints.swap(far_hints);
+          ev = std::move(far);
+        }
       } else {
         lambda *= 4.0;
       }

@@ -37,6 +37,8 @@ struct FitOptions {
   // `fair_iterations` it is dropped, because it also damps the slow radius ↔ offset valley
   // that decides the cutter's radius to 0.01 mm.
   int fair_iterations = 4;
+  // After an accepted step, try it again at 1×, 2×, 4× … while the cost falls.
+  int max_extrapolations = 4;
   double length = 0.0;  // rigid ruling length L; 0: the initial motion's mean length
   double scale = 0.0;   // normalising length; 0: bbox diagonal of Φ
 

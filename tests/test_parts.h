@@ -36,8 +36,8 @@ inline const char* paper_name(PaperTool tool) {
 
 // The recovery tests' resolution: 361 × 91 (t × s) keeps the chord error under
 // 5e-6 × bbox diagonal for all three cutters (checked in fit_motion_test).
-constexpr int kRecoveryRows = 361;
-constexpr int kRecoveryCols = 91;
+constexpr int kRecoveryRows = 481;
+constexpr int kRecoveryCols = 121;
 
 inline SynthResult paper_part(PaperTool tool, int rows = kRecoveryRows, int cols = kRecoveryCols) {
   SynthOptions so;
