@@ -127,6 +127,31 @@ TEST_F(Cli, FitWritesEveryOutput) {
   EXPECT_NE(m.out.find("movability"), std::string::npos);
 }
 
+// patches.json without its timing_s block.
+std::string without_timing(const fs::path& json) {
+  std::ifstream in(json);
+  std::string text(std::istreambuf_iterator<char>(in), {});
+  const auto begin = text.find("\"timing_s\"");
+  const auto end = text.find('}', begin);
+  if (begin != std::string::npos && end != std::string::npos) text.erase(begin, end - begin + 1);
+  return text;
+}
+
+TEST_F(Cli, SameResultWhateverTheThreadCount) {
+  const fs::path mesh = dir_ / "part.stl";
+  ASSERT_EQ(run("synth --guides seed003 --tool cone:4,7 --resolution 121x31 -o " + mesh.string()).code, 0);
+  std::string json[2];
+  for (int threads : {1, 2}) {
+    const fs::path out = dir_ / ("t" + std::to_string(threads));
+    const CliRun r = run("fit " + mesh.string() + " " + kLine + " --tolerance-rel 5e-4 -q --threads " +
+                         std::to_string(threads) + " -o " + out.string());
+    ASSERT_EQ(r.code, 0) << r.err;
+    json[threads - 1] = without_timing(out / "patches.json");
+  }
+  EXPECT_EQ(json[0], json[1]);
+  EXPECT_GT(json[0].size(), 1000u);
+}
+
 TEST_F(Cli, HelpIsReadable) {
   const CliRun r = run("fit --help");
   EXPECT_EQ(r.code, 0);
