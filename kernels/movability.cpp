@@ -10,7 +10,8 @@ double movability_sample(int i, int n) { return (i + 0.5) / n; }
 
 Movability movability_from_directions(const Vec3& a, const Vec3& b, std::span<const double> s,
                                       PointsRef g, std::span<const double> weights,
-                                      double null_cutoff) {
+                                      double null_cutoff, const Vec3* tangent,
+                                      double tangent_below) {
   Movability out;
   out.samples = static_cast<int>(s.size());
   const Vec3 ab = b - a;
@@ -55,9 +56,20 @@ Movability movability_from_directions(const Vec3& a, const Vec3& b, std::span<co
   Eigen::Matrix2d S = Amm - Amy * Ayy_pinv * Amy.transpose();
   S = 0.5 * (S + S.transpose());
   Eigen::SelfAdjointEigenSolver<Eigen::Matrix2d> es(S);
-  const Eigen::Vector2d mu = es.eigenvectors().col(0);
+  Eigen::Vector2d mu = es.eigenvectors().col(0);
+  double value = es.eigenvalues()(0), value_other = es.eigenvalues()(1);
+  if (tangent && es.eigenvalues()(1) <= tangent_below) {
+    // Both sweeps are (nearly) free: take the one tangent to Φ. Its cost is μᵀSμ.
+    const Eigen::Vector2d t(tangent->dot(out.n1), tangent->dot(out.n2));
+    if (t.norm() > 0) {
+      mu = t.normalized();
+      value = mu.dot(S * mu);
+      value_other = S.trace() - value;
+    }
+  }
   const Eigen::Vector3d y = -Ayy_pinv * Amy.transpose() * mu;
-  out.value = std::max(0.0, es.eigenvalues()(0));
+  out.value = std::max(0.0, value);
+  out.value_other = std::max(0.0, value_other);
   out.mu1 = mu(0), out.mu2 = mu(1);
   out.alpha = y(0), out.lambda1 = y(1), out.lambda2 = y(2);
   out.status = MovabilityStatus::ok;
@@ -94,7 +106,15 @@ Movability movability(const SurfaceIndex& index, const Vec3& a, const Vec3& b,
       jump = true;
     if (static_cast<int>(hints.size()) == n) hints[i] = cp[i].face;
   }
-  Movability out = movability_from_directions(a, b, s, g, w, options.null_cutoff);
+  Vec3 tangent = Vec3::Zero();
+  if (options.tangent_sweep_below > 0) {
+    Vec3 mean_g = Vec3::Zero();
+    for (int i = 0; i < n; ++i) mean_g += w[i] * g.row(i).transpose();
+    tangent = (b - a).cross(mean_g);
+  }
+  Movability out = movability_from_directions(a, b, s, g, w, options.null_cutoff,
+                                              options.tangent_sweep_below > 0 ? &tangent : nullptr,
+                                              options.tangent_sweep_below);
   out.boundary_samples = boundary;
   if (options.profile && out.status == MovabilityStatus::ok) {
     std::vector<double> ss, dd;

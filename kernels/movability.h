@@ -32,11 +32,16 @@ struct MovabilityOptions {
   // zero: 1e-9 keeps the exact answer on analytic data; propagation uses 1e-4 so that
   // sliding along a cylinder-like line (g·u is mesh noise there) is not amplified into motion.
   double null_cutoff = 1e-9;
+  // Propagation: when both sweeps of S cost at most this, take the one tangent to Φ (closest
+  // to u × mean g) rather than the cheaper one. On a cone-like line "approach Φ while sliding
+  // along the axis" keeps every distance too, and noise can make it the cheaper one.
+  double tangent_sweep_below = 0.0;
 };
 
 struct Movability {
   MovabilityStatus status = MovabilityStatus::degenerate;
   double value = std::numeric_limits<double>::infinity();  // F_l = λ_min(S)
+  double value_other = std::numeric_limits<double>::infinity();  // λ_max(S): the other sweep
   // x = (μ1, μ2, α, λ1, λ2) in the frame (u, n1, n2), μ1² + μ2² = 1.
   double mu1 = 0, mu2 = 0, alpha = 0, lambda1 = 0, lambda2 = 0;
   Vec3 u = Vec3::Zero(), n1 = Vec3::Zero(), n2 = Vec3::Zero();
@@ -62,9 +67,11 @@ double movability_sample(int i, int n);
 // Movability from given unit distance-gradient directions g_i at parameters s_i on line ab
 // (#n by 3 `g`, n values `s`, optional 0/1 `weights`). Pure linear algebra, no mesh: this is
 // what the analytic tests feed with exact footpoints.
+// `tangent` (optional, ⟂ ab) and `tangent_below`: see MovabilityOptions::tangent_sweep_below.
 Movability movability_from_directions(const Vec3& a, const Vec3& b, std::span<const double> s,
                                       PointsRef g, std::span<const double> weights = {},
-                                      double null_cutoff = 1e-9);
+                                      double null_cutoff = 1e-9, const Vec3* tangent = nullptr,
+                                      double tangent_below = 0.0);
 
 // Movability of line ab against Φ. `hints` (empty or options.samples faces) warm-starts the
 // closest-point queries and receives the new footpoint faces. Runs on the calling thread.

@@ -1,6 +1,8 @@
 #include "solver/propagate.h"
 
 #include <cmath>
+#include <cstdio>
+#include <cstdlib>
 #include <limits>
 #include <numbers>
 
@@ -102,6 +104,47 @@ struct Stepper {
     const Vec3 mid = 0.5 * (l.a + l.b), dir = (l.b - l.a).normalized();
     return {mid - 0.5 * L * dir, mid + 0.5 * L * dir};
   }
+
+  // Footpoint distances of the samples (NaN where the footpoint is beyond Φ's boundary).
+  std::vector<double> distances(const Line& l, std::vector<ClosestPoint>* cp) {
+    const int n = options.movability.samples;
+    Points q(n, 3);
+    for (int i = 0; i < n; ++i) q.row(i) = l.point(movability_sample(i, n)).transpose();
+    cp->resize(static_cast<std::size_t>(n));
+    index.closest_points_serial(q, hints, *cp);
+    std::vector<double> d(static_cast<std::size_t>(n));
+    for (int i = 0; i < n; ++i)
+      d[i] = (*cp)[i].boundary || (*cp)[i].face < 0 ? std::numeric_limits<double>::quiet_NaN()
+                                                    : (*cp)[i].distance;
+    return d;
+  }
+
+  // Corrector of the predictor–corrector continuation: one Gauss–Newton step on the line's
+  // five degrees of freedom back to the start line's distance profile (the same cutter).
+  // Without it the weakly determined sliding of cone-like lines integrates into drift.
+  Line correct(const Line& l) {
+    std::vector<ClosestPoint> cp;
+    const std::vector<double> d = distances(l, &cp);
+    const int n = options.movability.samples;
+    const Vec3 u = (l.b - l.a).normalized(), n1 = u.unitOrthogonal(), n2 = u.cross(n1);
+    Eigen::Matrix<double, 5, 5> H = Eigen::Matrix<double, 5, 5>::Zero();
+    Eigen::Matrix<double, 5, 1> g = Eigen::Matrix<double, 5, 1>::Zero();
+    for (int i = 0; i < n; ++i) {
+      if (!std::isfinite(d[i]) || !std::isfinite(profile[i])) continue;
+      const double s = movability_sample(i, n);
+      const Vec3& gi = cp[i].direction;
+      Eigen::Matrix<double, 5, 1> k;
+      k << (1 - s) * gi.dot(n1), (1 - s) * gi.dot(n2), s * gi.dot(n1), s * gi.dot(n2), gi.dot(u);
+      H.noalias() += k * k.transpose();
+      g += k * (d[i] - profile[i]);
+    }
+    if (!(H.trace() > 0)) return l;
+    H.diagonal().array() += 1e-6 * H.trace();  // the sweep itself is free: keep it still
+    const Eigen::Matrix<double, 5, 1> x = -H.ldlt().solve(g);
+    return rigid({l.a + x(0) * n1 + x(1) * n2 + x(4) * u, l.b + x(2) * n1 + x(3) * n2 + x(4) * u});
+  }
+
+  std::vector<double> profile;  // the start line's footpoint distances
 };
 
 PropagateStop run(Stepper& st, const Line& start, const Vec3& initial_dir, double h,
@@ -118,6 +161,9 @@ PropagateStop run(Stepper& st, const Line& start, const Vec3& initial_dir, doubl
     if (mv.status == MovabilityStatus::jump) return PropagateStop::jump;
     if (mv.value > st.options.max_movability) return PropagateStop::max_movability;
     *worst = std::max(*worst, mv.value);
+    if (std::getenv("FLANK_TRACE_PROPAGATE"))
+      std::fprintf(stderr, "step %zu F %.3g other %.3g alpha %.3f a %.2f %.2f %.2f\n", out->size(), mv.value,
+                   mv.value_other, mv.alpha, cur.a.x(), cur.a.y(), cur.a.z());
     // RK2 (midpoint rule); the speed of the midpoint across the axis is 1, so h is a length.
     const Vec3 u = (cur.b - cur.a).normalized();
     const Vec3 vm1 = 0.5 * (va + vb) - u.dot(0.5 * (va + vb)) * u;
@@ -125,7 +171,7 @@ PropagateStop run(Stepper& st, const Line& start, const Vec3& initial_dir, doubl
     Vec3 va2, vb2;
     Movability mv2;
     if (!st.velocity(half, vm1, &va2, &vb2, &mv2) || !mv2.ok()) return PropagateStop::left_surface;
-    const Line next = st.rigid({cur.a + h * va2, cur.b + h * vb2});
+    const Line next = st.correct(st.rigid({cur.a + h * va2, cur.b + h * vb2}));
     ref = 0.5 * (va2 + vb2);
     ref -= u.dot(ref) * u;
     travel += (0.5 * (next.a + next.b) - 0.5 * (cur.a + cur.b)).norm();
@@ -142,8 +188,13 @@ Propagation propagate(const SurfaceIndex& index, const Line& start,
   const double cap = options.max_travel > 0 ? options.max_travel : 4.0 * index.diagonal();
   PropagateOptions po = options;
   po.movability.null_cutoff = std::max(po.movability.null_cutoff, 1e-4);
+  po.movability.tangent_sweep_below = std::max(po.movability.tangent_sweep_below, options.max_movability);
   Stepper st{index, po, std::vector<int>(static_cast<std::size_t>(options.movability.samples), -1),
-             start.length()};
+             start.length(), {}};
+  {
+    std::vector<ClosestPoint> cp;
+    st.profile = st.distances(start, &cp);
+  }
   Movability m0 = movability(index, start.a, start.b, po.movability, st.hints);
   p.max_movability = m0.value;
   if (!m0.ok()) {

@@ -89,10 +89,7 @@ TEST(ExactRecoveryLineDriven, CylinderFromOneLine) {
   EXPECT_GE(r.patch.coverage_fraction, 0.95);
   std::printf("[ recovered ] line-driven cylinder: radius %.4f, max|e| %.2e x diag, coverage %.4f\n",
               r.fit.fit.cutter.radius(0.5), r.patch.error.max / diag, r.patch.coverage_fraction);
-  // Known limitation: from one line the radius lands at 4.962, not within the 0.01 mm the
-  // surface-driven start reaches. The axis surface of this part is nearly developable, so
-  // radius ↔ offset is a valley whose error is below the mesh's chord error; see README.
-  EXPECT_NEAR(r.fit.fit.cutter.radius(0.5), 5.0, 0.05);
+  EXPECT_NEAR(r.fit.fit.cutter.radius(0.5), 5.0, 0.01);
 }
 
 // Ω against the clean surface: the largest |e| of the fitted sphere family on it.
