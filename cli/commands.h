@@ -12,5 +12,6 @@ void register_info(CLI::App& app, int* exit_code);
 void register_synth(CLI::App& app, int* exit_code);
 void register_movability(CLI::App& app, int* exit_code);
 void register_fit(CLI::App& app, int* exit_code);
+void register_decompose(CLI::App& app, int* exit_code);
 
 }  // namespace flank::cli

@@ -17,6 +17,7 @@ int main(int argc, char** argv) {
   int exit_code = 0;
   flank::cli::register_info(app, &exit_code);
   flank::cli::register_movability(app, &exit_code);
+  flank::cli::register_decompose(app, &exit_code);
   flank::cli::register_fit(app, &exit_code);
   flank::cli::register_synth(app, &exit_code);
   try {

@@ -17,6 +17,7 @@ const char* to_string(PropagateStop stop) {
     case PropagateStop::left_surface: return "left the surface";
     case PropagateStop::jump: return "footpoints jump";
     case PropagateStop::max_travel: return "travel cap";
+    case PropagateStop::stalled: return "stalled (the corrector undoes the sweep)";
     case PropagateStop::degenerate: return "degenerate";
   }
   return "unknown";
@@ -174,7 +175,11 @@ PropagateStop run(Stepper& st, const Line& start, const Vec3& initial_dir, doubl
     const Line next = st.correct(st.rigid({cur.a + h * va2, cur.b + h * vb2}));
     ref = 0.5 * (va2 + vb2);
     ref -= u.dot(ref) * u;
-    travel += (0.5 * (next.a + next.b) - 0.5 * (cur.a + cur.b)).norm();
+    const double progress = (0.5 * (next.a + next.b) - 0.5 * (cur.a + cur.b)).norm();
+    // Where keeping the cutter's profile forbids the sweep, the corrector pulls the line back
+    // onto itself: no progress is a stop, not a loop.
+    if (progress < 0.25 * h) return PropagateStop::stalled;
+    travel += progress;
     out->push_back(next);
     cur = next;
   }

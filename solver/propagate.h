@@ -42,7 +42,7 @@ struct PropagateOptions {
   double max_travel = 0.0;        // midpoint path cap each way; 0: 4 × bbox diagonal
 };
 
-enum class PropagateStop { max_movability, left_surface, jump, max_travel, degenerate };
+enum class PropagateStop { max_movability, left_surface, jump, max_travel, stalled, degenerate };
 const char* to_string(PropagateStop stop);
 
 struct Propagation {

@@ -1,0 +1,178 @@
+// flank decompose: the whole part in, a small set of flank-millable patches out, with no line
+// drawn by hand.
+#include <CLI/CLI.hpp>
+#include <cstdio>
+#include <filesystem>
+#include <optional>
+#include <sstream>
+
+#include "cli/commands.h"
+#include "cli/common.h"
+#include "io/read_mesh.h"
+#include "io/write.h"
+#include "kernels/parallel.h"
+#include "solver/decompose.h"
+
+namespace flank::cli {
+
+namespace {
+
+struct DecomposeArgs {
+  std::string mesh, out_dir, tools = "cone", radius, length, holder;
+  std::optional<double> tolerance, tolerance_rel;
+  int threads = 0, max_patches = 20, apt_steps = 200;
+  double coverage = 0.95;
+  bool flip = false, quiet = false;
+};
+
+std::vector<CutterKind> parse_kinds(const std::string& text) {
+  std::vector<CutterKind> kinds;
+  std::stringstream in(text);
+  std::string item;
+  while (std::getline(in, item, ',')) {
+    CutterKind k;
+    if (!parse_cutter_kind(item, &k))
+      throw UsageError("--tool takes cylinder, cone, barrel or spline (comma-separated), not '" + item + "'");
+    kinds.push_back(k);
+  }
+  if (kinds.empty()) throw UsageError("--tool needs at least one cutter kind");
+  return kinds;
+}
+
+int run_decompose(const DecomposeArgs& a) {
+  Progress progress("decompose", a.quiet);
+  DecomposeOptions o;
+  o.kinds = parse_kinds(a.tools);
+  if (!a.radius.empty()) std::tie(o.radius_min, o.radius_max) = parse_pair(a.radius, "--radius");
+  if (!a.length.empty()) std::tie(o.length_min, o.length_max) = parse_pair(a.length, "--length");
+  if (!a.holder.empty()) {
+    o.holder = true;
+    std::tie(o.holder_length, o.holder_radius) = parse_pair(a.holder, "--holder");
+  }
+  o.coverage_target = a.coverage;
+  o.max_patches = a.max_patches;
+  resolve_tolerance(a.tolerance, a.tolerance_rel, 1.0);  // refuse bad values before any work
+  o.tolerance = 1.0;                                     // placeholder until the diagonal is known
+  if (std::string e = o.validate(); !e.empty()) throw UsageError(e);
+
+  ThreadLimit limit(a.threads);
+  io::ReadOptions ro;
+  ro.flip = a.flip;
+  const io::LoadedMesh lm = io::read_mesh(a.mesh, ro);
+  progress.stage("read " + std::to_string(lm.mesh.vertex_count()) + " vertices, " +
+                 std::to_string(lm.mesh.face_count()) + " triangles");
+  const double t_index = progress.elapsed();
+  const SurfaceIndex index(lm.mesh);
+  const double index_s = progress.elapsed() - t_index;
+  const double diagonal = index.diagonal();
+  o.tolerance = resolve_tolerance(a.tolerance, a.tolerance_rel, diagonal);
+  progress.stage("indexed; tolerance " + std::to_string(o.tolerance) + " mm");
+
+  const double t_start = progress.elapsed();
+  const DecomposeResult r = decompose(index, o, [&](const std::string& s) { progress.stage(s); });
+  const double total = progress.elapsed();
+
+  io::RunInfo run;
+  run.input_path = a.mesh;
+  run.vertices = lm.mesh.vertex_count();
+  run.triangles = lm.mesh.face_count();
+  run.bbox_diagonal = diagonal;
+  std::vector<double> kinds_idx;
+  std::string kinds_text;
+  for (CutterKind k : o.kinds) kinds_text += (kinds_text.empty() ? "" : ",") + std::string(to_string(k));
+  run.settings = {{"command", std::string("decompose")},
+                  {"tolerance", o.tolerance},
+                  {"tool", kinds_text},
+                  {"radius", std::vector<double>{o.radius_min > 0 ? o.radius_min : 0.01 * diagonal,
+                                                 o.radius_max > 0 ? o.radius_max : 0.10 * diagonal}},
+                  {"length", std::vector<double>{o.length_min > 0 ? o.length_min : 0.10 * diagonal,
+                                                 o.length_max > 0 ? o.length_max : 0.45 * diagonal}},
+                  {"coverage_target", o.coverage_target},
+                  {"max_patches", static_cast<long long>(o.max_patches)},
+                  {"max_rounds", static_cast<long long>(o.max_rounds)},
+                  {"candidates_per_seed", std::vector<double>{double(o.directions), double(o.tilts),
+                                                              double(o.radii), double(o.lengths)}},
+                  {"control_points", static_cast<long long>(o.control_points)},
+                  {"flip", a.flip}};
+  if (o.holder) run.settings.push_back({"holder", std::vector<double>{o.holder_length, o.holder_radius}});
+  run.tolerance = o.tolerance;
+  run.coverage_fraction = r.coverage;
+  run.uncovered_area = r.total_area - r.covered_area;
+  run.timing_s = {{"index", index_s},        {"seeds", r.times.seeds}, {"candidates", r.times.candidates},
+                  {"fit", r.times.fit},      {"cover", r.times.cover}, {"total", total}};
+  (void)t_start;
+
+  std::error_code ec;
+  std::filesystem::create_directories(a.out_dir, ec);
+  if (ec) throw io::Error(a.out_dir + ": cannot create output folder: " + ec.message());
+  const std::filesystem::path dir(a.out_dir);
+  io::write_patches_json(dir / "patches.json", run, r.patches);
+  io::write_envelopes_ply(dir / "envelopes.ply", r.patches, o.tolerance);
+  io::write_design_ply(dir / "design.ply", lm.mesh, r.vertex_patch);
+  io::write_toolpath_apt(dir / "toolpath.apt", r.patches, a.apt_steps,
+                         std::filesystem::path(a.mesh).stem().string());
+
+  std::printf("%s: %zu patch%s cover %.2f%% of %.4g mm^2 within %.3g mm\n", a.mesh.c_str(),
+              r.patches.size(), r.patches.size() == 1 ? "" : "es", 100.0 * r.coverage, r.total_area,
+              o.tolerance);
+  double worst = 0.0;
+  for (const Patch& p : r.patches) {
+    worst = std::max(worst, p.error.max);
+    std::printf("  patch %d: %-8s L %.2f mm, sphere radii %.3f..%.3f mm, covers %.2f%%, max |e| %.2e mm%s\n",
+                p.id, std::string(to_string(p.cutter.kind)).c_str(), p.cutter.length,
+                p.cutter.radius(0), p.cutter.radius(1), 100.0 * p.coverage_fraction, p.error.max,
+                p.collision.checked ? (p.collision.holder_clear ? ", holder clear" : ", HOLDER COLLIDES") : "");
+  }
+  if (r.patches.empty())
+    std::printf("  no patch meets the tolerance with the allowed cutters: try a larger --tolerance, "
+                "other --tool kinds or wider --radius/--length ranges\n");
+  std::printf("worst error %.3e mm; uncovered %.4g mm^2 in %zu region%s", worst,
+              r.total_area - r.covered_area, r.uncovered.size(), r.uncovered.size() == 1 ? "" : "s");
+  for (std::size_t k = 0; k < std::min<std::size_t>(3, r.uncovered.size()); ++k)
+    std::printf("%s %.3g mm^2 at (%.1f, %.1f, %.1f)", k ? "," : ":", r.uncovered[k].area,
+                r.uncovered[k].centroid.x(), r.uncovered[k].centroid.y(), r.uncovered[k].centroid.z());
+  std::printf("\n");
+  std::printf("time: index %.2fs, seeds %.2fs, candidates %.2fs (%lld lines), fit %.2fs (%d grown), "
+              "cover %.2fs, total %.2fs\n",
+              index_s, r.times.seeds, r.times.candidates, r.lines_scored, r.times.fit, r.grown,
+              r.times.cover, total);
+  std::printf("results in %s: patches.json envelopes.ply design.ply toolpath.apt\n", a.out_dir.c_str());
+  return 0;
+}
+
+}  // namespace
+
+void register_decompose(CLI::App& app, int* exit_code) {
+  auto* cmd = app.add_subcommand(
+      "decompose", "Find, fully automatically, a few large flank-millable patches covering the part");
+  auto a = std::make_shared<DecomposeArgs>();
+  cmd->add_option("MESH", a->mesh, "Design surface: STL, OBJ or PLY")->required();
+  cmd->add_option("-o,--output", a->out_dir, "Folder for patches.json, envelopes.ply, design.ply, toolpath.apt")
+      ->required();
+  cmd->add_option("--tolerance", a->tolerance, "Allowed error in mm");
+  cmd->add_option("--tolerance-rel", a->tolerance_rel,
+                  "Allowed error as a fraction of the bounding-box diagonal (default 1e-4)");
+  cmd->add_option("--tool", a->tools,
+                  "Cutter shapes allowed, comma-separated: cylinder, cone, barrel, spline (default cone)");
+  cmd->add_option("--radius", a->radius, "Allowed cutter radii MIN,MAX in mm (default 1%..10% of the diagonal)");
+  cmd->add_option("--length", a->length, "Allowed cutter lengths MIN,MAX in mm (default 10%..45% of the diagonal)");
+  cmd->add_option("--holder", a->holder, "Check the holder: LEN,RADIUS of a cylinder beyond the spindle end, in mm");
+  cmd->add_option("--coverage", a->coverage, "Stop when this fraction of the area is covered (default 0.95)")
+      ->check(CLI::Range(0.01, 1.0));
+  cmd->add_option("--max-patches", a->max_patches, "At most this many patches (default 20)")->check(CLI::Range(1, 10000));
+  cmd->add_option("--threads", a->threads, "Worker threads (default: all cores)")->check(CLI::Range(1, 1024));
+  cmd->add_option("--apt-steps", a->apt_steps, "GOTO steps per patch in toolpath.apt (default 200)")
+      ->check(CLI::Range(2, 1000000));
+  cmd->add_flag("--flip", a->flip, "Reverse the surface orientation (tools live on the normals' side)");
+  cmd->add_flag("-q,--quiet", a->quiet, "No progress lines on stderr");
+  cmd->callback([=]() {
+    try {
+      *exit_code = run_decompose(*a);
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "flank decompose: %s\n", e.what());
+      *exit_code = 2;
+    }
+  });
+}
+
+}  // namespace flank::cli
