@@ -17,12 +17,10 @@ namespace flank::cli {
 
 namespace {
 
-struct DecomposeArgs {
-  std::string mesh, out_dir, tools = "cone", radius, length, holder;
-  std::optional<double> tolerance, tolerance_rel;
-  int threads = 0, max_patches = 20, apt_steps = 200;
+struct DecomposeArgs : PatchArgs {
+  std::string tools = "cone", radius, length;
+  int max_patches = 20;
   double coverage = 0.95;
-  bool flip = false, quiet = false;
 };
 
 std::vector<CutterKind> parse_kinds(const std::string& text) {
@@ -77,7 +75,6 @@ int run_decompose(const DecomposeArgs& a) {
   run.vertices = lm.mesh.vertex_count();
   run.triangles = lm.mesh.face_count();
   run.bbox_diagonal = diagonal;
-  std::vector<double> kinds_idx;
   std::string kinds_text;
   for (CutterKind k : o.kinds) kinds_text += (kinds_text.empty() ? "" : ",") + std::string(to_string(k));
   run.settings = {{"command", std::string("decompose")},
@@ -102,15 +99,7 @@ int run_decompose(const DecomposeArgs& a) {
                   {"fit", r.times.fit},      {"cover", r.times.cover}, {"total", total}};
   (void)t_start;
 
-  std::error_code ec;
-  std::filesystem::create_directories(a.out_dir, ec);
-  if (ec) throw io::Error(a.out_dir + ": cannot create output folder: " + ec.message());
-  const std::filesystem::path dir(a.out_dir);
-  io::write_patches_json(dir / "patches.json", run, r.patches);
-  io::write_envelopes_ply(dir / "envelopes.ply", r.patches, o.tolerance);
-  io::write_design_ply(dir / "design.ply", lm.mesh, r.vertex_patch);
-  io::write_toolpath_apt(dir / "toolpath.apt", r.patches, a.apt_steps,
-                         std::filesystem::path(a.mesh).stem().string());
+  write_outputs(a, run, r.patches, lm.mesh, r.vertex_patch, o.tolerance);
 
   std::printf("%s: %zu patch%s cover %.2f%% of %.4g mm^2 within %.3g mm\n", a.mesh.c_str(),
               r.patches.size(), r.patches.size() == 1 ? "" : "es", 100.0 * r.coverage, r.total_area,
@@ -146,25 +135,14 @@ void register_decompose(CLI::App& app, int* exit_code) {
   auto* cmd = app.add_subcommand(
       "decompose", "Find, fully automatically, a few large flank-millable patches covering the part");
   auto a = std::make_shared<DecomposeArgs>();
-  cmd->add_option("MESH", a->mesh, "Design surface: STL, OBJ or PLY")->required();
-  cmd->add_option("-o,--output", a->out_dir, "Folder for patches.json, envelopes.ply, design.ply, toolpath.apt")
-      ->required();
-  cmd->add_option("--tolerance", a->tolerance, "Allowed error in mm");
-  cmd->add_option("--tolerance-rel", a->tolerance_rel,
-                  "Allowed error as a fraction of the bounding-box diagonal (default 1e-4)");
+  add_patch_options(cmd, *a);
   cmd->add_option("--tool", a->tools,
                   "Cutter shapes allowed, comma-separated: cylinder, cone, barrel, spline (default cone)");
   cmd->add_option("--radius", a->radius, "Allowed cutter radii MIN,MAX in mm (default 1%..10% of the diagonal)");
   cmd->add_option("--length", a->length, "Allowed cutter lengths MIN,MAX in mm (default 10%..45% of the diagonal)");
-  cmd->add_option("--holder", a->holder, "Check the holder: LEN,RADIUS of a cylinder beyond the spindle end, in mm");
   cmd->add_option("--coverage", a->coverage, "Stop when this fraction of the area is covered (default 0.95)")
       ->check(CLI::Range(0.01, 1.0));
   cmd->add_option("--max-patches", a->max_patches, "At most this many patches (default 20)")->check(CLI::Range(1, 10000));
-  cmd->add_option("--threads", a->threads, "Worker threads (default: all cores)")->check(CLI::Range(1, 1024));
-  cmd->add_option("--apt-steps", a->apt_steps, "GOTO steps per patch in toolpath.apt (default 200)")
-      ->check(CLI::Range(2, 1000000));
-  cmd->add_flag("--flip", a->flip, "Reverse the surface orientation (tools live on the normals' side)");
-  cmd->add_flag("-q,--quiet", a->quiet, "No progress lines on stderr");
   cmd->callback([=]() {
     try {
       *exit_code = run_decompose(*a);

@@ -18,11 +18,9 @@ namespace flank::cli {
 
 namespace {
 
-struct FitArgs {
-  std::string mesh, line, lines_file, out_dir, tool = "cone", holder;
-  std::optional<double> tolerance, tolerance_rel;
-  int threads = 0, control_points = 40, samples_t = 100, samples_s = 30, apt_steps = 200;
-  bool flip = false, quiet = false;
+struct FitArgs : PatchArgs {
+  std::string line, lines_file, tool = "cone";
+  int control_points = 40, samples_t = 100, samples_s = 30;
 };
 
 // Most axis samples behind Φ's faces means the normals point away from the tool.
@@ -134,18 +132,10 @@ int run_fit(const FitArgs& a) {
   run.uncovered_area = total_area(lm.mesh) - patch.covered_area;
   run.timing_s = {{"index", index_s}, {"fit", fit.fit.timing.total_s}, {"total", progress.elapsed()}};
 
-  std::error_code ec;
-  std::filesystem::create_directories(a.out_dir, ec);
-  if (ec) throw io::Error(a.out_dir + ": cannot create output folder: " + ec.message());
-  const std::filesystem::path dir(a.out_dir);
   std::vector<Patch> patches{std::move(patch)};
   std::vector<int> vertex_patch(static_cast<std::size_t>(lm.mesh.vertex_count()), -1);
   for (int v : patches[0].covered_vertices) vertex_patch[static_cast<std::size_t>(v)] = 0;
-  io::write_patches_json(dir / "patches.json", run, patches);
-  io::write_envelopes_ply(dir / "envelopes.ply", patches, tol);
-  io::write_design_ply(dir / "design.ply", lm.mesh, vertex_patch);
-  io::write_toolpath_apt(dir / "toolpath.apt", patches, a.apt_steps,
-                         std::filesystem::path(a.mesh).stem().string());
+  write_outputs(a, run, patches, lm.mesh, vertex_patch, tol);
   const Patch& p = patches[0];
   std::printf("patch 0: %s cutter, length %.4f mm, sphere radii %.4f..%.4f mm\n",
               std::string(to_string(p.cutter.kind)).c_str(), p.cutter.length, p.cutter.radius(0),
@@ -167,30 +157,18 @@ void register_fit(CLI::App& app, int* exit_code) {
   auto* cmd = app.add_subcommand(
       "fit", "Fit one flank-millable patch from a start you give: one line or ordered lines");
   auto a = std::make_shared<FitArgs>();
-  cmd->add_option("MESH", a->mesh, "Design surface: STL, OBJ or PLY")->required();
+  add_patch_options(cmd, *a);
   cmd->add_option("--line", a->line,
                   "Line-driven start: a cutter axis x0,y0,z0,x1,y1,z1 in mm, tip first; flank "
                   "improves it locally and sweeps it both ways");
   cmd->add_option("--lines", a->lines_file,
                   "Surface-driven start: a text file, one axis per row 'x0 y0 z0 x1 y1 z1', in "
                   "the order the cutter should pass them");
-  cmd->add_option("-o,--output", a->out_dir, "Folder for patches.json, envelopes.ply, design.ply, toolpath.apt")
-      ->required();
-  cmd->add_option("--tolerance", a->tolerance, "Allowed error in mm");
-  cmd->add_option("--tolerance-rel", a->tolerance_rel,
-                  "Allowed error as a fraction of the bounding-box diagonal (default 1e-4)");
   cmd->add_option("--tool", a->tool, "Cutter shape: cylinder, cone, barrel or spline (default cone)");
-  cmd->add_option("--holder", a->holder,
-                  "Check the holder: LEN,RADIUS of a cylinder beyond the cutter's spindle end, in mm");
-  cmd->add_option("--threads", a->threads, "Worker threads (default: all cores)")->check(CLI::Range(1, 1024));
   cmd->add_option("--control-points", a->control_points, "B-spline control points per axis end curve (default 40)")
       ->check(CLI::Range(4, 200));
   cmd->add_option("--samples-t", a->samples_t, "Samples along the motion (default 100)")->check(CLI::Range(8, 100000));
   cmd->add_option("--samples-s", a->samples_s, "Samples along the axis (default 30)")->check(CLI::Range(4, 10000));
-  cmd->add_option("--apt-steps", a->apt_steps, "GOTO steps per patch in toolpath.apt (default 200)")
-      ->check(CLI::Range(2, 1000000));
-  cmd->add_flag("--flip", a->flip, "Reverse the surface orientation (tools live on the normals' side)");
-  cmd->add_flag("-q,--quiet", a->quiet, "No progress lines on stderr");
   cmd->callback([=]() {
     try {
       *exit_code = run_fit(*a);

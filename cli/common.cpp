@@ -1,5 +1,8 @@
 #include "cli/common.h"
 
+#include <CLI/CLI.hpp>
+#include <filesystem>
+
 #include <cmath>
 #include <cstdio>
 #include <fstream>
@@ -89,6 +92,35 @@ double resolve_tolerance(std::optional<double> absolute, std::optional<double> r
   const double r = relative ? *relative : 1e-4;
   if (!(r > 0) || !(r < 1)) throw UsageError("--tolerance-rel must be in (0, 1)");
   return r * diagonal;
+}
+
+void add_patch_options(CLI::App* cmd, PatchArgs& a) {
+  cmd->add_option("MESH", a.mesh, "Design surface: STL, OBJ or PLY")->required();
+  cmd->add_option("-o,--output", a.out_dir, "Folder for patches.json, envelopes.ply, design.ply, toolpath.apt")
+      ->required();
+  cmd->add_option("--tolerance", a.tolerance, "Allowed error in mm");
+  cmd->add_option("--tolerance-rel", a.tolerance_rel,
+                  "Allowed error as a fraction of the bounding-box diagonal (default 1e-4)");
+  cmd->add_option("--holder", a.holder,
+                  "Check the holder: LEN,RADIUS of a cylinder beyond the cutter's spindle end, in mm");
+  cmd->add_option("--threads", a.threads, "Worker threads (default: all cores)")->check(CLI::Range(1, 1024));
+  cmd->add_option("--apt-steps", a.apt_steps, "GOTO steps per patch in toolpath.apt (default 200)")
+      ->check(CLI::Range(2, 1000000));
+  cmd->add_flag("--flip", a.flip, "Reverse the surface orientation (tools live on the normals' side)");
+  cmd->add_flag("-q,--quiet", a.quiet, "No progress lines on stderr");
+}
+
+void write_outputs(const PatchArgs& a, const io::RunInfo& run, const std::vector<Patch>& patches,
+                   const Mesh& mesh, const std::vector<int>& vertex_patch, double tolerance) {
+  std::error_code ec;
+  std::filesystem::create_directories(a.out_dir, ec);
+  if (ec) throw io::Error(a.out_dir + ": cannot create output folder: " + ec.message());
+  const std::filesystem::path dir(a.out_dir);
+  io::write_patches_json(dir / "patches.json", run, patches);
+  io::write_envelopes_ply(dir / "envelopes.ply", patches, tolerance);
+  io::write_design_ply(dir / "design.ply", mesh, vertex_patch);
+  io::write_toolpath_apt(dir / "toolpath.apt", patches, a.apt_steps,
+                         std::filesystem::path(a.mesh).stem().string());
 }
 
 }  // namespace flank::cli

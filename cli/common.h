@@ -9,9 +9,29 @@
 #include <vector>
 
 #include "io/read_mesh.h"
+#include "io/write.h"
 #include "solver/motion.h"
+#include "solver/patch.h"
+
+namespace CLI {
+class App;
+}
 
 namespace flank::cli {
+
+// Options every patch-producing command takes (fit, decompose).
+struct PatchArgs {
+  std::string mesh, out_dir, holder;
+  std::optional<double> tolerance, tolerance_rel;
+  int threads = 0, apt_steps = 200;
+  bool flip = false, quiet = false;
+};
+void add_patch_options(CLI::App* cmd, PatchArgs& a);
+
+// patches.json, envelopes.ply, design.ply and toolpath.apt into a.out_dir (created if
+// missing), each written atomically.
+void write_outputs(const PatchArgs& a, const io::RunInfo& run, const std::vector<Patch>& patches,
+                   const Mesh& mesh, const std::vector<int>& vertex_patch, double tolerance);
 
 // An impossible option or unusable value: the CLI prints "flank CMD: message" and exits 2.
 class UsageError : public std::runtime_error {

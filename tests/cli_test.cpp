@@ -152,6 +152,22 @@ TEST_F(Cli, SameResultWhateverTheThreadCount) {
   EXPECT_GT(json[0].size(), 1000u);
 }
 
+TEST_F(Cli, DecomposeReportsNothingFoundAndRefusesImpossibleOptions) {
+  const fs::path mesh = dir_ / "part.stl";
+  ASSERT_EQ(run("synth --guides seed003 --tool cylinder:5 --resolution 61x21 -o " + mesh.string()).code, 0);
+  const fs::path out = dir_ / "results";
+  // A tolerance no cutter can meet: a clear report with zero patches, exit 0.
+  const CliRun none = run("decompose " + mesh.string() + " --tolerance 1e-9 --tool cylinder -q -o " + out.string());
+  EXPECT_EQ(none.code, 0) << none.err;
+  EXPECT_NE(none.out.find("0 patches"), std::string::npos) << none.out;
+  EXPECT_NE(none.out.find("no patch meets the tolerance"), std::string::npos) << none.out;
+  EXPECT_TRUE(fs::exists(out / "patches.json"));
+  const fs::path out2 = dir_ / "results2";
+  expect_clean_failure(run("decompose " + mesh.string() + " --radius 5,1 -o " + out2.string()), "--radius", out2);
+  expect_clean_failure(run("decompose " + mesh.string() + " --tool cone,drill -o " + out2.string()), "drill", out2);
+  expect_clean_failure(run("decompose " + mesh.string() + " --length 0,10 -o " + out2.string()), "--length", out2);
+}
+
 TEST_F(Cli, HelpIsReadable) {
   const CliRun r = run("fit --help");
   EXPECT_EQ(r.code, 0);
