@@ -31,7 +31,9 @@ ErrorGrid sample_errors(const SurfaceIndex& index, const Motion& motion, const C
   grid.error.resize(q.rows());
   grid.interior.resize(cp.size());
   grid.faces.resize(cp.size());
+  grid.directions.resize(static_cast<Eigen::Index>(cp.size()), 3);
   for (std::size_t k = 0; k < cp.size(); ++k) {
+    grid.directions.row(static_cast<Eigen::Index>(k)) = cp[k].direction.transpose();
     const double dk = d[k % static_cast<std::size_t>(cols)];
     grid.interior[k] = !cp[k].boundary && cp[k].face >= 0;
     // Beyond Φ's edge the sign of the face plane means nothing: there a sphere gouges only
@@ -45,7 +47,7 @@ ErrorGrid sample_errors(const SurfaceIndex& index, const Motion& motion, const C
 
 namespace {
 
-Mesh envelope_mesh(const SurfaceIndex& index, const Motion& motion, const Cutter& cutter,
+Mesh envelope_mesh(const Motion& motion, const Cutter& cutter,
                    const ErrorGrid& grid, EnvelopeMesh* out) {
   const int rows = grid.rows, cols = grid.cols;
   Points V(static_cast<Eigen::Index>(rows) * cols, 3);
@@ -61,9 +63,9 @@ Mesh envelope_mesh(const SurfaceIndex& index, const Motion& motion, const Cutter
         const double s = static_cast<double>(j) / (cols - 1);
         const Vec3 centre = (1 - s) * a + s * bb;
         const Vec3 rt = (1 - s) * at + s * bt;
-        const ClosestPoint f = index.closest_point(centre, grid.faces[static_cast<std::size_t>(i * cols + j)]);
         // Φ's side: the envelope normal points from the axis toward the footpoint.
-        const int side = envelope_side(rt, bb - a, -f.direction);
+        const Vec3 g = grid.directions.row(i * cols + j).transpose();
+        const int side = envelope_side(rt, bb - a, -g);
         const EnvelopePoint ep = envelope_point(centre, rt, bb - a, cutter.radius(s), cutter.slope(s), side);
         const std::size_t k = static_cast<std::size_t>(i * cols + j);
         valid[k] = ep.valid;
@@ -144,7 +146,7 @@ Patch evaluate_patch(const SurfaceIndex& index, const Motion& motion, const Cutt
   }
 
   if (options.envelope || options.coverage) {
-    const Mesh omega = envelope_mesh(index, motion, cutter, grid, &patch.envelope);
+    const Mesh omega = envelope_mesh(motion, cutter, grid, &patch.envelope);
     if (options.coverage && omega.F.rows() > 0) {
       const SurfaceIndex omega_index(omega);
       const Mesh& phi = index.mesh();

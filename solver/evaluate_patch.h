@@ -19,6 +19,7 @@ struct ErrorGrid {
   VecX error;                 // rows·cols, row-major over t; signed (negative: gouge)
   std::vector<char> interior; // footpoint inside Φ (not beyond its boundary)
   std::vector<int> faces;     // footpoint faces (warm starts for a finer pass)
+  Points directions;          // unit g of every sample (from Φ toward the sphere centre)
   double at(int i, int j) const { return error(i * cols + j); }
   bool inside(int i, int j) const { return interior[static_cast<std::size_t>(i * cols + j)] != 0; }
 };
