@@ -2,7 +2,6 @@
 // drawn by hand.
 #include <CLI/CLI.hpp>
 #include <cstdio>
-#include <filesystem>
 #include <optional>
 #include <sstream>
 
@@ -66,7 +65,6 @@ int run_decompose(const DecomposeArgs& a) {
   o.tolerance = resolve_tolerance(a.tolerance, a.tolerance_rel, diagonal);
   progress.stage("indexed; tolerance " + std::to_string(o.tolerance) + " mm");
 
-  const double t_start = progress.elapsed();
   const DecomposeResult r = decompose(index, o, [&](const std::string& s) { progress.stage(s); });
   const double total = progress.elapsed();
 
@@ -97,7 +95,6 @@ int run_decompose(const DecomposeArgs& a) {
   run.uncovered_area = r.total_area - r.covered_area;
   run.timing_s = {{"index", index_s},        {"seeds", r.times.seeds}, {"candidates", r.times.candidates},
                   {"fit", r.times.fit},      {"cover", r.times.cover}, {"total", total}};
-  (void)t_start;
 
   write_outputs(a, run, r.patches, lm.mesh, r.vertex_patch, o.tolerance);
 

@@ -2,7 +2,6 @@
 // ordered lines (surface-driven, §4.4) — fitted, trimmed, evaluated and written out.
 #include <CLI/CLI.hpp>
 #include <cstdio>
-#include <filesystem>
 #include <optional>
 
 #include "cli/commands.h"
