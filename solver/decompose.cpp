@@ -2,6 +2,8 @@
 
 #include <algorithm>
 #include <chrono>
+#include <cstdio>
+#include <cstdlib>
 #include <cmath>
 #include <numbers>
 #include <numeric>
@@ -62,6 +64,8 @@ std::vector<double> spread(double lo, double hi, int count, bool geometric) {
 
 struct LineCandidate {
   Line line;
+  double inside = 0.0;  // length of the line whose footpoints are inside Φ
+  double swept = 0.0;   // how far it sweeps in the probe (sweep_probe)
   CutterKind kind = CutterKind::cone;
   double score = std::numeric_limits<double>::infinity();
   Movability movability;
@@ -69,13 +73,84 @@ struct LineCandidate {
   bool good = false;
 };
 
+// F_l alone is a narrow hole: on an exact envelope it is ~1e-9 on the ruling and ~5e-6
+// already 0.2 mm off it, flat beyond. The misfit of the cutter profile grows linearly with
+// the offset instead (about 0.014 mm per mm on the paper's part), so weighted in it leads a
+// local search into the hole from millimetres away.
+constexpr double kProfileWeight = 1e3;
+
 double line_score(const Movability& m, double L) {
   const double misfit = m.profile_rms / L;
-  return m.value + misfit * misfit;
+  return m.value + kProfileWeight * misfit * misfit;
+}
+
+double inside_length(const Movability& m, double L) {
+  return m.samples > 0 ? L * (m.samples - m.boundary_samples) / m.samples : 0.0;
 }
 
 bool acceptable(const Movability& m, const Ranges& R, double L) {
   return m.ok() && m.max_slope < 0.9 * L && m.radius_min >= R.r0 && m.radius_max <= R.r1;
+}
+
+PropagateOptions propagate_options(const SurfaceIndex& index, const DecomposeOptions& o) {
+  // A sweep drifts from Φ by about √F_l per unit of travel: to stay within tolerance over a
+  // sweep of half the diagonal, F_l must stay below (tol / (diagonal/2))²; 20× that leaves the
+  // fit room to correct.
+  PropagateOptions po;
+  const double rel = o.tolerance / (0.5 * index.diagonal());
+  po.max_movability = std::min(po.max_movability, 400.0 * rel * rel);
+  return po;
+}
+
+// How far the line sweeps (both ways together, each way at most kProbe of the diagonal)
+// before it stalls, leaves Φ or stops moving like a ruling.
+constexpr double kProbe = 0.15;
+double sweep_probe(const SurfaceIndex& index, const Line& line, const DecomposeOptions& o) {
+  PropagateOptions po = propagate_options(index, o);
+  po.max_travel = kProbe * index.diagonal();
+  const Propagation p = propagate(index, line, po);
+  const double h = 1e-3 * index.diagonal();  // propagate's default step
+  return static_cast<double>(p.rulings.size() - 1) * h;
+}
+
+// The line on the same axis that spans Φ's width: centred on the run of footpoints inside Φ
+// through its middle, as long as that run plus 2% overhang at each end, within the allowed
+// lengths. Where Φ goes on past the longest allowed cutter on one side, the line starts at
+// the edge on the other; where on both sides, it keeps its middle.
+Line span_width(const SurfaceIndex& index, const Line& line, const Ranges& R) {
+  const double L = line.length();
+  const Vec3 u = (line.b - line.a) / L;
+  // Start from the middle of the longest run of samples inside Φ: a grid line through a seed
+  // near Φ's edge may have its middle off Φ.
+  constexpr int kSamples = 32;
+  int hint = -1, run = 0, best = 0, best_end = -1;
+  for (int k = 0; k < kSamples; ++k) {
+    const ClosestPoint cp = index.closest_point(line.point((k + 0.5) / kSamples), hint);
+    if (cp.face >= 0) hint = cp.face;
+    run = cp.face >= 0 && !cp.boundary ? run + 1 : 0;
+    if (run > best) best = run, best_end = k;
+  }
+  if (best == 0) return line;
+  const double from = (best_end + 1.0 - 0.5 * best) / kSamples;
+  const double reach = std::max(0.0, R.l1 / L - 0.5);
+  const double lo = interior_edge(index, line, true, from, reach, &hint);
+  const double hi = interior_edge(index, line, false, from, reach, &hint);
+  constexpr double kOverhang = 0.02;
+  if (std::isfinite(lo) && std::isfinite(hi)) {
+    const double len = std::clamp((hi - lo) * L * (1.0 + 2.0 * kOverhang), R.l0, R.l1);
+    const Vec3 mid = line.point(0.5 * (lo + hi));
+    return {mid - 0.5 * len * u, mid + 0.5 * len * u};
+  }
+  if (std::isfinite(lo)) {
+    const Vec3 a = line.point(lo) - kOverhang * R.l1 * u;
+    return {a, a + R.l1 * u};
+  }
+  if (std::isfinite(hi)) {
+    const Vec3 b = line.point(hi) + kOverhang * R.l1 * u;
+    return {b - R.l1 * u, b};
+  }
+  const Vec3 mid = 0.5 * (line.a + line.b);
+  return {mid - 0.5 * R.l1 * u, mid + 0.5 * R.l1 * u};
 }
 
 // Candidate lines at one seed (DESIGN): midpoint p + r N, direction in the tangent plane at
@@ -87,10 +162,27 @@ std::vector<LineCandidate> seed_candidates(const SurfaceIndex& index, const Seed
   const std::vector<double> radii = spread(R.r0, R.r1, o.radii, true);
   const std::vector<double> lengths = spread(R.l0, R.l1, o.lengths, false);
   std::vector<LineCandidate> best;
+  // A line that sweeps (F_l tiny) with a profile its cutter can follow is a patch in waiting.
+  auto good = [&](const LineCandidate& c) {
+    // The fit corrects a line a degree or two off, so "good" asks for the right shape of
+    // profile, not already the tolerance: the fit and trim decide the final quality.
+    return c.movability.ok() && c.movability.value <= o.good_movability &&
+           c.movability.profile_rms <= 4.0 * o.tolerance;
+  };
+  // Good lines first, the longest inside Φ first among them (the ruling across the whole
+  // width beats a short chord that sweeps only locally); then by score.
+  auto better = [](const LineCandidate& x, const LineCandidate& y) {
+    if (x.good != y.good) return x.good;
+    if (x.good && std::abs(x.inside - y.inside) > 1e-9) return x.inside > y.inside;
+    return x.score < y.score;
+  };
   for (CutterKind kind : o.kinds) {
     MovabilityOptions coarse;
     coarse.samples = o.coarse_samples;
     coarse.profile = kind;
+    // A line may overhang Φ by up to half its length here: span_width fits it to Φ's width
+    // later, and a true ruling through a seed off the middle of the width overhangs one side.
+    coarse.max_boundary_fraction = 0.5;
     std::vector<LineCandidate> all;
     std::vector<int> hints(static_cast<std::size_t>(o.coarse_samples), -1);
     for (double L : lengths)
@@ -114,12 +206,13 @@ std::vector<LineCandidate> seed_candidates(const SurfaceIndex& index, const Seed
             ++*scored;
             if (!acceptable(c.movability, R, L)) continue;
             c.score = line_score(c.movability, L);
+            c.inside = inside_length(c.movability, L);
+            c.good = good(c);
             all.push_back(c);
           }
         }
-    // Stable order: score, then generation order, so ties never depend on anything else.
-    std::stable_sort(all.begin(), all.end(),
-                     [](const LineCandidate& x, const LineCandidate& y) { return x.score < y.score; });
+    // Stable order, so ties never depend on anything but generation order.
+    std::stable_sort(all.begin(), all.end(), better);
     if (static_cast<int>(all.size()) > o.fine_candidates) all.resize(static_cast<std::size_t>(o.fine_candidates));
     MovabilityOptions fine = coarse;
     fine.samples = o.fine_samples;
@@ -129,26 +222,52 @@ std::vector<LineCandidate> seed_candidates(const SurfaceIndex& index, const Seed
       const double L = c.line.length();
       c.score = acceptable(c.movability, R, L) ? line_score(c.movability, L)
                                                : std::numeric_limits<double>::infinity();
+      c.inside = inside_length(c.movability, L);
+      c.good = std::isfinite(c.score) && good(c);
     }
-    std::stable_sort(all.begin(), all.end(),
-                     [](const LineCandidate& x, const LineCandidate& y) { return x.score < y.score; });
-    for (const LineCandidate& c : all) {
-      if (!std::isfinite(c.score)) break;
-      best.push_back(c);
-    }
+    std::stable_sort(all.begin(), all.end(), better);
+    for (const LineCandidate& c : all)
+      if (std::isfinite(c.score)) best.push_back(c);
   }
-  // A line that sweeps (F_l tiny) with a profile its cutter can follow is a patch in waiting.
-  auto good = [&](const LineCandidate& c) {
-    // The fit corrects a line a degree or two off, so "good" asks for the right shape of
-    // profile, not already the tolerance: the fit and trim decide the final quality.
-    return c.movability.ok() && c.movability.value <= o.good_movability &&
-           c.movability.profile_rms <= 4.0 * o.tolerance;
+  std::stable_sort(best.begin(), best.end(), better);
+  // The paper's local search (Fig. 8): first spanning Φ's width along the line, then at the
+  // shorter allowed lengths: the grid of directions is coarse, and the longest line that
+  // still sweeps covers most.
+  auto polish = [&](LineCandidate c) {
+    const Line spanning = span_width(index, c.line, R);
+    const Vec3 u = (spanning.b - spanning.a).normalized(), mid = 0.5 * (spanning.a + spanning.b);
+    std::vector<double> ladder{spanning.length()};
+    for (double L : lengths)
+      if (L < 0.95 * ladder.front()) ladder.push_back(L);
+    RefineLineOptions ro;
+    ro.kind = c.kind;
+    ro.movability.samples = o.fine_samples;
+    ro.candidates_per_end = 9;
+    ro.rounds = 5;  // down to 1/16 of the first radius: the hole is ~0.2 mm wide
+    ro.profile_weight = kProfileWeight;
+    LineCandidate first;
+    for (double L : ladder) {
+      LineCandidate t = c;
+      const RefinedLine r = refine_line(index, {mid - 0.5 * L * u, mid + 0.5 * L * u}, ro);
+      *scored += r.evaluated;
+      t.line = r.line;
+      t.movability = r.movability;
+      t.score = acceptable(r.movability, R, L) ? line_score(r.movability, L)
+                                               : std::numeric_limits<double>::infinity();
+      t.good = std::isfinite(t.score) && good(t);
+      if (L == ladder.front()) first = t;
+      if (t.good) return t;
+      if (L == ladder.back()) return std::isfinite(first.score) ? first : t;
+    }
+    return c;
   };
-  // Distinct directions by score: a second line within 20° of a kept one grows the same patch.
+  // Kept: distinct lines by rank, polished, that sweep. A second line within 20° of a kept one
+  // and of about its radius grows the same patch; another radius may not (the radius ↔ offset
+  // valley hides the radius locally; only growing tells which one sweeps the whole part).
   std::vector<LineCandidate> kept;
+  int attempts = 0;
   for (const LineCandidate& c : best) {
-    // Distinct: another direction, or another radius (the radius ↔ offset valley makes the
-    // radius invisible locally; only growing tells which one sweeps the whole part).
+    if (static_cast<int>(kept.size()) >= o.lines_per_seed || attempts >= 3 * o.lines_per_seed) break;
     const Vec3 u = (c.line.b - c.line.a).normalized();
     bool distinct = true;
     for (const LineCandidate& k : kept) {
@@ -158,39 +277,21 @@ std::vector<LineCandidate> seed_candidates(const SurfaceIndex& index, const Seed
       const bool same_radius = std::abs(ra - rb) <= 0.2 * std::max(ra, rb);
       distinct &= !(same_dir && same_radius);
     }
-    if (distinct) kept.push_back(c);
-    if (static_cast<int>(kept.size()) >= o.lines_per_seed) break;
+    if (!distinct) continue;
+    ++attempts;
+    LineCandidate p = polish(c);
+    // A line that cannot sweep a few millimetres is no ruling: a barrel-like profile also
+    // fits the curved distances of a chord along the part's long direction, and only moving
+    // the line tells them apart.
+    if (!std::isfinite(p.score)) continue;
+    p.swept = sweep_probe(index, p.line, o);
+    if (std::getenv("FLANK_TRACE_DECOMPOSE"))
+      std::fprintf(stderr, "seed %d line: kind %s, L %.2f, F_l %.2e, profile rms %.2e, swept %.2f\n", seed_id,
+                   std::string(to_string(p.kind)).c_str(), p.line.length(), p.movability.value, p.movability.profile_rms, p.swept);
+    if (p.swept >= 0.9 * kProbe * index.diagonal()) kept.push_back(p);
   }
-  // The paper's local search (Fig. 8) on each, at the allowed lengths from the longest down:
-  // the grid of directions is coarse, and the longest line that still sweeps covers most.
-  for (LineCandidate& c : kept) {
-    const Vec3 u = (c.line.b - c.line.a).normalized(), mid = 0.5 * (c.line.a + c.line.b);
-    RefineLineOptions ro;
-    ro.kind = c.kind;
-    ro.movability.samples = o.fine_samples;
-    ro.candidates_per_end = 9;
-    ro.rounds = 3;
-    LineCandidate first;
-    for (double L : lengths) {
-      LineCandidate t = c;
-      const RefinedLine r = refine_line(index, {mid - 0.5 * L * u, mid + 0.5 * L * u}, ro);
-      *scored += r.evaluated;
-      t.line = r.line;
-      t.movability = r.movability;
-      t.score = acceptable(r.movability, R, L) ? line_score(r.movability, L)
-                                               : std::numeric_limits<double>::infinity();
-      t.good = std::isfinite(t.score) && good(t);
-      if (L == lengths.front()) first = t;
-      if (t.good) {
-        c = t;
-        break;
-      }
-      if (L == lengths.back()) c = std::isfinite(first.score) ? first : t;
-    }
-  }
-  kept.erase(std::remove_if(kept.begin(), kept.end(),
-                            [](const LineCandidate& c) { return !std::isfinite(c.score); }),
-             kept.end());
+  std::stable_sort(kept.begin(), kept.end(),
+                   [](const LineCandidate& x, const LineCandidate& y) { return x.swept > y.swept; });
   return kept;
 }
 
@@ -202,13 +303,7 @@ struct Grown {
 Grown grow(const SurfaceIndex& index, const LineCandidate& c, const DecomposeOptions& o,
            const Ranges& R) {
   Grown g;
-  // A sweep drifts from Φ by about √F_l per unit of travel: to stay within tolerance over a
-  // sweep of half the diagonal, F_l must stay below (tol / (diagonal/2))²; 20× that leaves the
-  // fit room to correct.
-  PropagateOptions po;
-  const double rel = o.tolerance / (0.5 * index.diagonal());
-  po.max_movability = std::min(po.max_movability, 400.0 * rel * rel);
-  const Propagation prop = propagate(index, c.line, po);
+  const Propagation prop = propagate(index, c.line, propagate_options(index, o));
   if (prop.rulings.size() < 8) return g;
   const Motion init = Motion::fit(prop.rulings, o.control_points);
   FitPatchOptions fo;
@@ -233,6 +328,14 @@ Grown grow(const SurfaceIndex& index, const LineCandidate& c, const DecomposeOpt
   g.ok = g.patch.error.max_gouge <= o.tolerance && (!o.holder || g.patch.collision.holder_clear) &&
          !g.patch.covered_vertices.empty() && rmin >= R.r0 && rmax <= R.r1 &&
          g.patch.cutter.length >= 0.5 * R.l0;
+  if (std::getenv("FLANK_TRACE_DECOMPOSE"))
+    std::fprintf(stderr,
+                 "grow seed %d L %.2f r %.3f..%.3f F %.2e | rulings %zu stops %s / %s | cutter L %.2f r %.3f..%.3f "
+                 "cov %.3f max %.2e gouge %.2e ok %d\n",
+                 c.seed, c.line.length(), c.movability.radius_min, c.movability.radius_max, c.movability.value,
+                 prop.rulings.size(), to_string(prop.stop_backward), to_string(prop.stop_forward),
+                 g.patch.cutter.length, rmin, rmax, g.patch.coverage_fraction, g.patch.error.max,
+                 g.patch.error.max_gouge, g.ok);
   return g;
 }
 
@@ -288,6 +391,7 @@ DecomposeResult decompose(const SurfaceIndex& index, const DecomposeOptions& o,
 
   std::vector<Patch> pool;  // every valid candidate patch so far, in a deterministic order
   std::vector<char> used;
+  std::vector<Line> grown_lines;  // every line grown so far
   for (int round = 0; round < o.max_rounds; ++round) {
     // 1. Seeds: over all of Φ first, then over what is still uncovered.
     auto t0 = Clock::now();
@@ -314,14 +418,24 @@ DecomposeResult decompose(const SurfaceIndex& index, const DecomposeOptions& o,
       out.lines_scored += scored[s];
       lines.insert(lines.end(), per_seed[s].begin(), per_seed[s].end());
     }
-    std::stable_sort(lines.begin(), lines.end(), [](const LineCandidate& x, const LineCandidate& y) {
+    std::stable_sort(lines.begin(), lines.end(), [&](const LineCandidate& x, const LineCandidate& y) {
       if (x.good != y.good) return x.good;
+      // Farther in the probe first, to 1% of it: a ruling of the part sweeps on, others stall.
+      const double q = 0.01 * kProbe * diagonal;
+      if (std::floor(x.swept / q) != std::floor(y.swept / q)) return x.swept > y.swept;
       if (x.good && std::abs(x.line.length() - y.line.length()) > 1e-9)
         return x.line.length() > y.line.length();
       return x.score < y.score;
     });
+    // A line grown in an earlier round grows the same patch again: skip it.
+    std::erase_if(lines, [&](const LineCandidate& c) {
+      return std::any_of(grown_lines.begin(), grown_lines.end(), [&](const Line& l) {
+        return (l.a - c.line.a).norm() + (l.b - c.line.b).norm() <= 1e-9 * diagonal;
+      });
+    });
     if (static_cast<int>(lines.size()) > o.max_grown_per_round)
       lines.resize(static_cast<std::size_t>(o.max_grown_per_round));
+    for (const LineCandidate& c : lines) grown_lines.push_back(c.line);
     out.times.candidates += since(t0);
     say("round " + std::to_string(round + 1) + ": " + std::to_string(seeds.size()) + " seeds, " +
         std::to_string(out.lines_scored) + " lines scored, growing " + std::to_string(lines.size()));

@@ -81,6 +81,45 @@ RefinedLine refine_line(const SurfaceIndex& index, const Line& start,
   return best;
 }
 
+double interior_edge(const SurfaceIndex& index, const Line& line, bool low, double from,
+                     double reach, int* hint) {
+  constexpr double kStep = 1.0 / 64.0;
+  const double nan = std::numeric_limits<double>::quiet_NaN();
+  auto interior_at = [&](double s) {
+    const ClosestPoint cp = index.closest_point(line.point(s), *hint);
+    if (cp.face >= 0) *hint = cp.face;
+    return cp.face >= 0 && !cp.boundary;
+  };
+  const double inward = low ? 1.0 : -1.0;
+  double in, out;
+  if (interior_at(from)) {
+    in = from;
+    for (double s = from - inward * kStep;; s -= inward * kStep) {
+      if (low ? s < -reach : s > 1.0 + reach) return nan;
+      if (!interior_at(s)) {
+        out = s;
+        break;
+      }
+      in = s;
+    }
+  } else {
+    out = from;
+    for (double s = from + inward * kStep;; s += inward * kStep) {
+      if (low ? s > 0.5 : s < 0.5) return nan;
+      if (interior_at(s)) {
+        in = s;
+        break;
+      }
+      out = s;
+    }
+  }
+  for (int k = 0; k < 6; ++k) {  // to 1/4096 of the length
+    const double m = 0.5 * (in + out);
+    (interior_at(m) ? in : out) = m;
+  }
+  return 0.5 * (in + out);
+}
+
 namespace {
 struct Stepper {
   const SurfaceIndex& index;
@@ -96,8 +135,13 @@ struct Stepper {
     // direction of travel.
     const Vec3 sweep = mv->mu1 * mv->n1 + mv->mu2 * mv->n2;
     double sign = reference.squaredNorm() > 0 && sweep.dot(reference) < 0 ? -1.0 : 1.0;
-    *va = sign * mv->velocity(0.0);
-    *vb = sign * mv->velocity(1.0);
+    // The slide along the axis (α) is left to the corrector: on cone-like lines α trades
+    // against the approach to Φ and the footpoints barely tell them apart (|g·u| ≪ 1), so
+    // the integrated α is noise, while the corrector pins the axial position by the distance
+    // profile and Φ's edges.
+    const Vec3 slide = mv->alpha * mv->u;
+    *va = sign * (mv->velocity(0.0) - slide);
+    *vb = sign * (mv->velocity(1.0) - slide);
     return true;
   }
 
@@ -141,11 +185,45 @@ struct Stepper {
     }
     if (!(H.trace() > 0)) return l;
     H.diagonal().array() += 1e-6 * H.trace();  // the sweep itself is free: keep it still
+    // Axial position: where the part's edge crosses the line, it must cross it where it did at
+    // the start. A cylinder may slide along its axis at no cost in distance, and the true
+    // motion does slide (a′·u ≠ 0), so without this the line walks off the part's width.
+    double shift = 0.0;
+    int ends = 0;
+    for (int e = 0; e < 2; ++e) {
+      if (!std::isfinite(edge_start[e])) continue;
+      const double now = edge(l, e == 0, edge_now[e], &edge_hint[e]);
+      // An edge that jumps is another edge (the end of Φ across the motion): not this one.
+      if (!std::isfinite(now) || std::abs(now - edge_now[e]) * L > 4.0 * step) continue;
+      edge_now[e] = now;
+      shift += (now - edge_start[e]) * L;
+      ++ends;
+    }
+    if (std::getenv("FLANK_TRACE_PROPAGATE"))
+      std::fprintf(stderr, "  edges start %.4f %.4f now %.4f %.4f shift %.4f\n", edge_start[0], edge_start[1],
+                   edge_now[0], edge_now[1], ends ? shift / ends : 0.0);
+    if (ends > 0) {
+      const double w = 0.5 * n;
+      H(4, 4) += w;
+      g(4) -= w * shift / ends;
+    }
     const Eigen::Matrix<double, 5, 1> x = -H.ldlt().solve(g);
     return rigid({l.a + x(0) * n1 + x(1) * n2 + x(4) * u, l.b + x(2) * n1 + x(3) * n2 + x(4) * u});
   }
 
   std::vector<double> profile;  // the start line's footpoint distances
+
+  double edge(const Line& l, bool low, double from, int* hint) const {
+    return interior_edge(index, l, low, from, 0.25, hint);
+  }
+
+  double step = 0.0;                  // the integration step h
+  double edge_start[2] = {0.0, 0.0};  // low and high edge at the start line (NaN: none)
+  double edge_now[2] = {0.0, 0.0};
+  int edge_hint[2] = {-1, -1};
+  void reset_edges() {
+    for (int e = 0; e < 2; ++e) edge_now[e] = std::isfinite(edge_start[e]) ? edge_start[e] : 0.0, edge_hint[e] = -1;
+  }
 };
 
 PropagateStop run(Stepper& st, const Line& start, const Vec3& initial_dir, double h,
@@ -172,7 +250,8 @@ PropagateStop run(Stepper& st, const Line& start, const Vec3& initial_dir, doubl
     Vec3 va2, vb2;
     Movability mv2;
     if (!st.velocity(half, vm1, &va2, &vb2, &mv2) || !mv2.ok()) return PropagateStop::left_surface;
-    const Line next = st.correct(st.rigid({cur.a + h * va2, cur.b + h * vb2}));
+    const Line pred = st.rigid({cur.a + h * va2, cur.b + h * vb2});
+    const Line next = st.correct(pred);
     ref = 0.5 * (va2 + vb2);
     ref -= u.dot(ref) * u;
     const double progress = (0.5 * (next.a + next.b) - 0.5 * (cur.a + cur.b)).norm();
@@ -196,9 +275,12 @@ Propagation propagate(const SurfaceIndex& index, const Line& start,
   po.movability.tangent_sweep_below = std::max(po.movability.tangent_sweep_below, options.max_movability);
   Stepper st{index, po, std::vector<int>(static_cast<std::size_t>(options.movability.samples), -1),
              start.length(), {}};
+  st.step = h;
   {
     std::vector<ClosestPoint> cp;
     st.profile = st.distances(start, &cp);
+    for (int e = 0; e < 2; ++e) st.edge_start[e] = st.edge(start, e == 0, e == 0 ? 0.0 : 1.0, &st.edge_hint[e]);
+    st.reset_edges();
   }
   Movability m0 = movability(index, start.a, start.b, po.movability, st.hints);
   p.max_movability = m0.value;
@@ -210,6 +292,7 @@ Propagation propagate(const SurfaceIndex& index, const Line& start,
   std::vector<Line> forward, backward;
   p.stop_forward = run(st, start, dir, h, cap, &forward, &p.max_movability);
   std::fill(st.hints.begin(), st.hints.end(), -1);
+  st.reset_edges();
   p.stop_backward = run(st, start, -dir, h, cap, &backward, &p.max_movability);
   p.rulings.assign(backward.rbegin(), backward.rend());
   p.start_index = static_cast<int>(p.rulings.size());

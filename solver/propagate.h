@@ -35,6 +35,14 @@ struct RefinedLine {
 RefinedLine refine_line(const SurfaceIndex& index, const Line& start,
                         const RefineLineOptions& options = {});
 
+// Where the run of footpoints inside Φ (not beyond its boundary) along the line's extension
+// ends, in the line's parameter s (0 at a, 1 at b): searched from `from` toward the low
+// (s < from) or the high end, at most `reach` past the line's end, to 1/4096 of its length.
+// NaN when Φ goes on past the reach, or when there is nothing inside Φ between `from` and the
+// middle. `hint` is a face to start the closest-point search from (updated; -1 for none).
+double interior_edge(const SurfaceIndex& index, const Line& line, bool low, double from,
+                     double reach, int* hint);
+
 struct PropagateOptions {
   MovabilityOptions movability;
   double step = 0.0;              // midpoint step; 0: 1e-3 × bbox diagonal (DESIGN)

@@ -33,6 +33,7 @@ bool longest_run(const std::vector<char>& ok, int* begin, int* end) {
 TrimRange find_trim(const ErrorGrid& grid, double tolerance) {
   TrimRange range;
   std::vector<char> row_ok(static_cast<std::size_t>(grid.rows), 0);
+  std::vector<char> row_out(static_cast<std::size_t>(grid.rows), 0);  // nothing inside Φ
   for (int i = 0; i < grid.rows; ++i) {
     int inside = 0;
     bool within = true;
@@ -44,9 +45,15 @@ TrimRange find_trim(const ErrorGrid& grid, double tolerance) {
     // Samples beyond Φ's boundary are overhang, not error: a row goes only when it is out of
     // tolerance or has nothing inside Φ at all.
     row_ok[i] = within && inside > 0;
+    row_out[i] = inside == 0;
   }
   if (!longest_run(row_ok, &range.row0, &range.row1)) return range;
+  // Keep one sample of pure overhang past each end: the run's last sample inside Φ may lie up
+  // to a sample spacing short of Φ's edge, and cutting there leaves a strip uncut.
+  if (range.row0 > 0 && row_out[range.row0 - 1]) --range.row0;
+  if (range.row1 < grid.rows - 1 && row_out[range.row1 + 1]) ++range.row1;
   std::vector<char> col_ok(static_cast<std::size_t>(grid.cols), 0);
+  std::vector<char> col_out(static_cast<std::size_t>(grid.cols), 0);
   for (int j = 0; j < grid.cols; ++j) {
     int inside = 0;
     bool within = true;
@@ -56,8 +63,11 @@ TrimRange find_trim(const ErrorGrid& grid, double tolerance) {
       if (std::abs(grid.at(i, j)) > tolerance) within = false;
     }
     col_ok[j] = within && inside > 0;
+    col_out[j] = inside == 0;
   }
   if (!longest_run(col_ok, &range.col0, &range.col1)) return range;
+  if (range.col0 > 0 && col_out[range.col0 - 1]) --range.col0;
+  if (range.col1 < grid.cols - 1 && col_out[range.col1 + 1]) ++range.col1;
   range.empty = false;
   return range;
 }
