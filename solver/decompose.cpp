@@ -278,6 +278,9 @@ std::vector<LineCandidate> seed_candidates(const SurfaceIndex& index, const Seed
       distinct &= !(same_dir && same_radius);
     }
     if (!distinct) continue;
+    // Lines that do not sweep yet (ranked after those that do) get fewer tries: the local
+    // search rarely turns them into rulings, and with a tolerance nothing meets they are all.
+    if (!c.good && attempts >= o.lines_per_seed) break;
     ++attempts;
     LineCandidate p = polish(c);
     // A line that cannot sweep a few millimetres is no ruling: a barrel-like profile also
@@ -339,6 +342,40 @@ Grown grow(const SurfaceIndex& index, const LineCandidate& c, const DecomposeOpt
   return g;
 }
 
+struct Cover {
+  std::vector<int> vertex_patch;
+  std::vector<char> used;
+  double covered_area = 0.0;
+  std::vector<int> picks;  // pool indices, in the order chosen
+};
+
+// Greedy cover: most newly covered area; ties lower error, then lower pool index. Picks get
+// ids from `first_id` on.
+void greedy_cover(const std::vector<Patch>& pool, const VecX& area, const DecomposeOptions& o,
+                  double total_area, int first_id, Cover* c) {
+  for (;;) {
+    const int id = first_id + static_cast<int>(c->picks.size());
+    if (id >= o.max_patches) break;
+    if (c->covered_area >= o.coverage_target * total_area) break;
+    int pick = -1;
+    double best_gain = 0.0;
+    for (std::size_t k = 0; k < pool.size(); ++k) {
+      if (c->used[k]) continue;
+      double gain = 0.0;
+      for (int v : pool[k].covered_vertices)
+        if (c->vertex_patch[v] < 0) gain += area(v);
+      const bool better = pick < 0 || gain > best_gain ||
+                          (gain == best_gain && pool[k].error.max < pool[static_cast<std::size_t>(pick)].error.max);
+      if (better) pick = static_cast<int>(k), best_gain = gain;
+    }
+    if (pick < 0 || best_gain < o.min_gain * total_area) break;
+    c->used[static_cast<std::size_t>(pick)] = 1;
+    for (int v : pool[static_cast<std::size_t>(pick)].covered_vertices)
+      if (c->vertex_patch[v] < 0) c->vertex_patch[v] = id, c->covered_area += area(v);
+    c->picks.push_back(pick);
+  }
+}
+
 std::vector<UncoveredRegion> uncovered_regions(const Mesh& mesh, const std::vector<int>& vertex_patch,
                                                const VecX& area) {
   const int V = mesh.vertex_count();
@@ -393,6 +430,7 @@ DecomposeResult decompose(const SurfaceIndex& index, const DecomposeOptions& o,
   std::vector<char> used;
   std::vector<Line> grown_lines;  // every line grown so far
   for (int round = 0; round < o.max_rounds; ++round) {
+    const std::size_t patches_before = out.patches.size();
     // 1. Seeds: over all of Φ first, then over what is still uncovered.
     auto t0 = Clock::now();
     SeedOptions so;
@@ -440,51 +478,52 @@ DecomposeResult decompose(const SurfaceIndex& index, const DecomposeOptions& o,
     say("round " + std::to_string(round + 1) + ": " + std::to_string(seeds.size()) + " seeds, " +
         std::to_string(out.lines_scored) + " lines scored, growing " + std::to_string(lines.size()));
 
-    // 3. Grow and fit all candidates concurrently, one task each.
-    t0 = Clock::now();
-    std::vector<Grown> grown(lines.size());
-    parallel_invoke_each(lines.size(), [&](std::size_t k) { grown[k] = grow(index, lines[k], o, R); });
-    for (Grown& g : grown) {
-      ++out.grown;
-      if (!g.ok) continue;
-      ++out.candidates_valid;
-      pool.push_back(std::move(g.patch));
-      used.push_back(0);
-    }
-    out.times.fit += since(t0);
-    say("round " + std::to_string(round + 1) + ": " + std::to_string(out.candidates_valid) +
-        " candidate patches within tolerance so far");
-
-    // 4. Greedy cover: most newly covered area; ties lower error, then lower id.
-    t0 = Clock::now();
-    for (;;) {
-      if (static_cast<int>(out.patches.size()) >= o.max_patches) break;
-      if (out.covered_area >= o.coverage_target * out.total_area) break;
-      int pick = -1;
-      double best_gain = 0.0;
-      for (std::size_t k = 0; k < pool.size(); ++k) {
-        if (used[k]) continue;
-        double gain = 0.0;
-        for (int v : pool[k].covered_vertices)
-          if (out.vertex_patch[v] < 0) gain += area(v);
-        const bool better = pick < 0 || gain > best_gain ||
-                            (gain == best_gain && pool[k].error.max < pool[pick].error.max);
-        if (better) pick = static_cast<int>(k), best_gain = gain;
+    // 3–4. Grow and fit the lines concurrently, in batches of kBatch in rank order (one task
+    // each), and cover greedily. When the candidates so far already reach the coverage
+    // target, the rest are not grown: on a single envelope the first batch holds the patch.
+    // The batch size is fixed, so the result does not depend on the thread count.
+    constexpr std::size_t kBatch = 4;
+    for (std::size_t begin = 0;; begin += kBatch) {  // once at least, to cover from the pool
+      t0 = Clock::now();
+      const std::size_t end = std::min(lines.size(), begin + kBatch);
+      std::vector<Grown> grown(end - begin);
+      parallel_invoke_each(grown.size(), [&](std::size_t k) { grown[k] = grow(index, lines[begin + k], o, R); });
+      for (Grown& g : grown) {
+        ++out.grown;
+        if (!g.ok) continue;
+        ++out.candidates_valid;
+        pool.push_back(std::move(g.patch));
+        used.push_back(0);
       }
-      if (pick < 0 || best_gain < o.min_gain * out.total_area) break;
-      used[pick] = 1;
-      Patch p = pool[pick];
-      p.id = static_cast<int>(out.patches.size());
-      for (int v : p.covered_vertices)
-        if (out.vertex_patch[v] < 0) out.vertex_patch[v] = p.id, out.covered_area += area(v);
-      out.patches.push_back(std::move(p));
+      out.times.fit += since(t0);
+      say("round " + std::to_string(round + 1) + ": grown " + std::to_string(end) + " of " +
+          std::to_string(lines.size()) + ", " + std::to_string(out.candidates_valid) +
+          " candidate patches within tolerance so far");
+      t0 = Clock::now();
+      Cover trial{out.vertex_patch, used, out.covered_area, {}};
+      greedy_cover(pool, area, o, out.total_area, static_cast<int>(out.patches.size()), &trial);
+      const bool last = end == lines.size();
+      if (last || trial.covered_area >= o.coverage_target * out.total_area) {
+        out.vertex_patch = std::move(trial.vertex_patch);
+        used = std::move(trial.used);
+        out.covered_area = trial.covered_area;
+        for (int k : trial.picks) {
+          Patch p = pool[static_cast<std::size_t>(k)];
+          p.id = static_cast<int>(out.patches.size());
+          out.patches.push_back(std::move(p));
+        }
+        out.times.cover += since(t0);
+        break;
+      }
+      out.times.cover += since(t0);
     }
-    out.times.cover += since(t0);
     out.rounds = round + 1;
     out.coverage = out.total_area > 0 ? out.covered_area / out.total_area : 0.0;
     say("round " + std::to_string(round + 1) + ": " + std::to_string(out.patches.size()) +
         " patches cover " + std::to_string(100.0 * out.coverage) + "%");
     if (out.coverage >= o.coverage_target || static_cast<int>(out.patches.size()) >= o.max_patches) break;
+    // Nothing new covered: the next round would seed the same uncovered area the same way.
+    if (out.patches.size() == patches_before) break;
   }
   out.uncovered = uncovered_regions(mesh, out.vertex_patch, area);
   return out;
