@@ -108,9 +108,9 @@ constexpr double kProbe = 0.15;
 double sweep_probe(const SurfaceIndex& index, const Line& line, const DecomposeOptions& o) {
   PropagateOptions po = propagate_options(index, o);
   po.max_travel = kProbe * index.diagonal();
+  po.step = 1e-3 * index.diagonal();  // propagate's default, set here so the count converts
   const Propagation p = propagate(index, line, po);
-  const double h = 1e-3 * index.diagonal();  // propagate's default step
-  return static_cast<double>(p.rulings.size() - 1) * h;
+  return static_cast<double>(p.rulings.size() - 1) * po.step;
 }
 
 // The line on the same axis that spans Φ's width: centred on the run of footpoints inside Φ
