@@ -1,5 +1,9 @@
 #include "kernels/mesh.h"
 
+#include <algorithm>
+#include <cstdint>
+#include <unordered_map>
+
 namespace flank {
 
 BoundingBox bounding_box(const Mesh& mesh) {
@@ -41,5 +45,32 @@ VecX vertex_areas(const Mesh& mesh) {
 }
 
 double total_area(const Mesh& mesh) { return face_areas(mesh).sum(); }
+
+Mesh subdivide_midpoint(const Mesh& mesh) {
+  const int nv = mesh.vertex_count(), nf = mesh.face_count();
+  std::unordered_map<std::uint64_t, int> midpoint;  // undirected edge → new vertex
+  midpoint.reserve(static_cast<std::size_t>(3 * nf / 2 + 1));
+  std::vector<Vec3> added;
+  auto mid = [&](int a, int b) {
+    const auto key = (static_cast<std::uint64_t>(std::min(a, b)) << 32) | static_cast<std::uint32_t>(std::max(a, b));
+    const auto [it, inserted] = midpoint.try_emplace(key, nv + static_cast<int>(added.size()));
+    if (inserted) added.emplace_back(0.5 * (Vec3(mesh.V.row(a)) + Vec3(mesh.V.row(b))));
+    return it->second;
+  };
+  Mesh out;
+  out.F.resize(4 * static_cast<Eigen::Index>(nf), 3);
+  for (int f = 0; f < nf; ++f) {
+    const int a = mesh.F(f, 0), b = mesh.F(f, 1), c = mesh.F(f, 2);
+    const int ab = mid(a, b), bc = mid(b, c), ca = mid(c, a);
+    out.F.row(4 * f + 0) << a, ab, ca;
+    out.F.row(4 * f + 1) << ab, b, bc;
+    out.F.row(4 * f + 2) << ca, bc, c;
+    out.F.row(4 * f + 3) << ab, bc, ca;
+  }
+  out.V.resize(nv + static_cast<Eigen::Index>(added.size()), 3);
+  if (nv > 0) out.V.topRows(nv) = mesh.V;
+  for (std::size_t k = 0; k < added.size(); ++k) out.V.row(nv + static_cast<Eigen::Index>(k)) = added[k].transpose();
+  return out;
+}
 
 }  // namespace flank

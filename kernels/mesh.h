@@ -29,5 +29,9 @@ VecX face_areas(const Mesh& mesh);
 // #V barycentric vertex areas (a third of each incident face): the area a vertex stands for.
 VecX vertex_areas(const Mesh& mesh);
 double total_area(const Mesh& mesh);
+// Splits every triangle into four at its edge midpoints (shared edges share the midpoint):
+// 4× the faces on exactly the same surface, orientation kept. Used to re-mesh a part finer
+// for the scaling benchmarks without changing its shape.
+Mesh subdivide_midpoint(const Mesh& mesh);
 
 }  // namespace flank

@@ -212,6 +212,7 @@ struct SurfaceIndex::Impl {
   void build_scene();
 
   ClosestPoint query(const Vec3& p, int hint_face) const;
+  ClosestPoint query_once(const Vec3& p, int hint_face) const;
 };
 
 void SurfaceIndex::Impl::build_adjacency() {
@@ -329,6 +330,17 @@ bool point_query_callback(RTCPointQueryFunctionArguments* args) {
 }  // namespace
 
 ClosestPoint SurfaceIndex::Impl::query(const Vec3& p, int hint_face) const {
+#ifdef FLANK_SLOW_QUERIES
+  // A deliberate regression for test builds only (CMake -DFLANK_SLOW_QUERIES=ON): every
+  // query is answered twice. It exists to prove that `scripts/scaling-report --check` catches
+  // a slowdown; release builds never define it.
+  volatile const int twice = query_once(p, hint_face).face;
+  (void)twice;
+#endif
+  return query_once(p, hint_face);
+}
+
+ClosestPoint SurfaceIndex::Impl::query_once(const Vec3& p, int hint_face) const {
   ClosestPoint out;
   if (triangles.empty()) return out;
 

@@ -132,6 +132,7 @@ Evaluation evaluate(Problem& pb, const VecX& x, std::vector<int>& hints, FitTimi
   std::vector<ClosestPoint> cp = pb.index.closest_points(q, hints);
   for (std::size_t k = 0; k < cp.size(); ++k) hints[k] = cp[k].face;
   timing.query_s += seconds_since(t0);
+  timing.queries += static_cast<long long>(cp.size());
 
   t0 = Clock::now();
   std::vector<RowBlock> blocks(static_cast<std::size_t>(m));
@@ -301,6 +302,7 @@ FitResult fit_motion(const SurfaceIndex& index, const Motion& init_motion,
     const auto t0 = Clock::now();
     const std::vector<ClosestPoint> cp = index.closest_points(q);
     result.timing.query_s += seconds_since(t0);
+    result.timing.queries += static_cast<long long>(cp.size());
     std::vector<double> ss, dd;
     for (int i = 0; i < m; ++i)
       for (int j = 0; j < n; ++j) {

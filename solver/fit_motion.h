@@ -60,6 +60,7 @@ struct FitTiming {
   double assembly_s = 0.0;  // residuals, JᵀJ and Jᵀr
   double factor_s = 0.0;    // CHOLMOD analyse, factorise, solve
   double total_s = 0.0;
+  long long queries = 0;     // closest-point queries made
 };
 
 struct FitResult {

@@ -1,0 +1,351 @@
+// The scaling ladder (scripts/scaling-report): every stage of flank on a ladder of mesh sizes
+// of two parts, at 1 and 2 threads, so that time can be plotted against size and compared
+// with the raw closest-point rate measured on the same mesh in the same run.
+//
+// Parts: `cone`, the forward-model part (the Li–Mann–Bedi cone 4→7 envelope) synthesised at
+// about 1k, 4k, 16k, 64k, 256k and 1M triangles; `blade`, the bundled propeller blade
+// (data/propeller_blade_upper.stl, 522 triangles) re-meshed finer by midpoint subdivision,
+// 2k to 535k triangles on exactly the same surface. Names:
+//   Ladder/<stage>/<part>/tri_k:<thousands of triangles>/threads:<1|2>
+// Stages:
+//   index      BVH and adjacency build.
+//   query      raw cold closest points (batch, no hints) at the sample points of the scoring
+//              lines: the limit the other stages are measured against.
+//   scoring    candidate-line movability, 2048 lines × 30 samples, warm hints along a line,
+//              lines in parallel, as decompose issues them.
+//   fit        one Gauss–Newton motion fit from a perturbed start; GN time shares.
+//   decompose  the whole pipeline, time per stage.
+// The lines, query points and fit starts depend on the part, not on the rung, so rungs of a
+// part differ only in the mesh.
+#include "bench/ladder.h"
+
+#include <benchmark/benchmark.h>
+
+#include <chrono>
+#include <cmath>
+#include <iostream>
+#include <map>
+#include <memory>
+#include <mutex>
+#include <numbers>
+#include <optional>
+#include <random>
+#include <string>
+#include <vector>
+
+#include "io/read_mesh.h"
+#include "kernels/mesh.h"
+#include "kernels/movability.h"
+#include "kernels/parallel.h"
+#include "kernels/surface_index.h"
+#include "solver/decompose.h"
+#include "solver/fit_motion.h"
+#include "solver/propagate.h"
+#include "solver/synth.h"
+
+namespace flank {
+namespace {
+
+constexpr int kLines = 2048;
+constexpr int kSamples = 30;  // DESIGN: n = 30 samples per candidate line
+// The ladder's decompose tolerance (× diagonal). At the default 1e-4 the coarse rungs' own
+// chord error is above the tolerance and no line is good enough to grow; at 1e-3 most rungs
+// grow and fit candidates. The `grown` counter says how many, so that a rung's fit time is
+// read with the work it did.
+constexpr double kDecomposeTolerance = 1e-3;
+const char* const kBladePath = FLANK_DATA_DIR "/propeller_blade_upper.stl";
+
+enum class Part { cone, blade };
+const char* name(Part p) { return p == Part::cone ? "cone" : "blade"; }
+
+// A rung: `level` is the cone's grid step count across (rows = 4·level + 1, cols = level + 1)
+// or the blade's number of subdivisions.
+struct Rung {
+  Part part;
+  int level;
+  long long triangles;
+};
+
+Mesh cone_mesh(int level) {
+  SynthOptions so;
+  so.cols = level + 1;
+  so.rows = 4 * level + 1;
+  return synth_envelope(guide_motion(paper_guides(), kPaperToolLength),
+                        cone_profile(kPaperToolLength, 4, 7), so)
+      .mesh;
+}
+
+const Mesh& blade_base() {
+  static const Mesh mesh = io::read_mesh(kBladePath).mesh;
+  return mesh;
+}
+
+// What one rung's benchmarks share, built on first use and kept for the process.
+struct RungData {
+  Mesh mesh;
+  std::unique_ptr<SurfaceIndex> index;
+};
+
+// What a part's rungs share: the scoring lines, their sample points, the fit start.
+struct PartData {
+  std::vector<std::pair<Vec3, Vec3>> lines;
+  Points samples;                 // kLines·kSamples rows, line by line
+  std::optional<Motion> fit_start;
+  CutterKind fit_kind = CutterKind::cone;
+  std::string fit_error;
+  double diagonal = 0.0;
+  std::vector<CutterKind> decompose_kinds;
+};
+
+std::mutex cache_mutex;
+
+const RungData& rung_data(const Rung& r) {
+  static std::map<std::pair<int, int>, std::unique_ptr<RungData>> cache;
+  const std::lock_guard lock(cache_mutex);
+  auto& slot = cache[{static_cast<int>(r.part), r.level}];
+  if (!slot) {
+    // Keep one rung in memory at a time: the million-triangle rungs are large.
+    cache.clear();
+    auto d = std::make_unique<RungData>();
+    if (r.part == Part::cone) {
+      d->mesh = cone_mesh(r.level);
+    } else {
+      d->mesh = blade_base();
+      for (int k = 0; k < r.level; ++k) d->mesh = subdivide_midpoint(d->mesh);
+    }
+    d->index = std::make_unique<SurfaceIndex>(d->mesh);
+    auto& fresh = cache[{static_cast<int>(r.part), r.level}];
+    fresh = std::move(d);
+    return *fresh;
+  }
+  return *slot;
+}
+
+// Candidate-like lines over a reference mesh of the part: a point on Φ (area-weighted), lifted
+// 2% of the diagonal along the normal, a random direction in the tangent plane, 30% of the
+// diagonal long.
+void make_lines(const Mesh& reference, PartData& p) {
+  const VecX area = face_areas(reference);
+  const Points normals = face_normals(reference);
+  p.diagonal = bbox_diagonal(reference);
+  std::mt19937 rng(20261121);
+  std::discrete_distribution<int> face(area.data(), area.data() + area.size());
+  std::uniform_real_distribution<double> unit(0.0, 1.0);
+  p.samples.resize(static_cast<Eigen::Index>(kLines) * kSamples, 3);
+  for (int l = 0; l < kLines; ++l) {
+    const int f = face(rng);
+    double u = unit(rng), v = unit(rng);
+    if (u + v > 1) u = 1 - u, v = 1 - v;
+    const Vec3 a = reference.V.row(reference.F(f, 0)), b = reference.V.row(reference.F(f, 1)),
+               c = reference.V.row(reference.F(f, 2));
+    const Vec3 n = normals.row(f);
+    const Vec3 t1 = (b - a).normalized(), t2 = n.cross(t1);
+    const double angle = 2 * std::numbers::pi * unit(rng);
+    const Vec3 dir = std::cos(angle) * t1 + std::sin(angle) * t2;
+    const Vec3 mid = a + u * (b - a) + v * (c - a) + 0.02 * p.diagonal * n;
+    const Vec3 e0 = mid - 0.15 * p.diagonal * dir, e1 = mid + 0.15 * p.diagonal * dir;
+    p.lines.emplace_back(e0, e1);
+    for (int i = 0; i < kSamples; ++i) {
+      const double s = static_cast<double>(i) / (kSamples - 1);
+      p.samples.row(l * kSamples + i) = ((1 - s) * e0 + s * e1).transpose();
+    }
+  }
+}
+
+// Seven lines across a motion, 2% of their length off it and turned 2°: a start the fit has
+// to work from, as a propagated candidate is.
+Motion perturbed_start(const AxisMotion& motion) {
+  std::vector<Line> lines;
+  for (int i = 0; i < 7; ++i) {
+    const double t = i / 6.0;
+    const Vec3 a = motion.a(t, 0), b = motion.b(t, 0);
+    const double length = (b - a).norm();
+    const Vec3 u = (b - a) / length;
+    const Vec3 n = (i % 2 ? 1.0 : -1.0) * u.cross(motion.a(t, 1)).normalized();
+    const Vec3 mid = 0.5 * (a + b) + 0.02 * length * n;
+    const Vec3 u2 = Eigen::AngleAxisd(2.0 * std::numbers::pi / 180.0, u.cross(n)) * u;
+    lines.push_back({mid - 0.5 * length * u2, mid + 0.5 * length * u2});
+  }
+  return motion_from_lines(lines, 40);
+}
+
+const PartData& part_data(Part part) {
+  static std::map<Part, std::unique_ptr<PartData>> cache;
+  static std::mutex mutex;
+  const std::lock_guard lock(mutex);
+  auto& slot = cache[part];
+  if (slot) return *slot;
+  slot = std::make_unique<PartData>();
+  PartData& p = *slot;
+  if (part == Part::cone) {
+    make_lines(cone_mesh(60), p);
+    p.fit_start = perturbed_start(guide_motion(paper_guides(), kPaperToolLength));
+    p.fit_kind = CutterKind::cone;
+    p.decompose_kinds = {CutterKind::cone};
+  } else {
+    // The blade's own motion is unknown: start the fit from the patch decompose finds on the
+    // coarse blade at a loose tolerance, perturbed. The surface is the same on every rung.
+    const Mesh& base = blade_base();
+    make_lines(base, p);
+    p.decompose_kinds = {CutterKind::cone, CutterKind::barrel};
+    const SurfaceIndex index(base);
+    DecomposeOptions o;
+    o.tolerance = 1e-3 * index.diagonal();
+    o.kinds = p.decompose_kinds;
+    const DecomposeResult r = decompose(index, o);
+    if (r.patches.empty()) {
+      p.fit_error = "decompose found no patch on the coarse blade to start a fit from";
+    } else {
+      p.fit_start = perturbed_start(spline_motion(r.patches.front().motion));
+      p.fit_kind = r.patches.front().cutter.kind;
+    }
+  }
+  return p;
+}
+
+void bench_index(benchmark::State& state, Rung r, int threads) {
+  const Mesh& mesh = rung_data(r).mesh;
+  const ThreadLimit limit(threads);
+  for (auto _ : state) {
+    const SurfaceIndex index(mesh);
+    benchmark::DoNotOptimize(&index);
+  }
+  state.counters["triangles"] = static_cast<double>(mesh.face_count());
+}
+
+void bench_query(benchmark::State& state, Rung r, int threads) {
+  const SurfaceIndex& index = *rung_data(r).index;
+  const PartData& p = part_data(r.part);
+  const ThreadLimit limit(threads);
+  for (auto _ : state) {
+    const std::vector<ClosestPoint> cp = index.closest_points(p.samples);
+    benchmark::DoNotOptimize(cp.data());
+  }
+  const double queries = static_cast<double>(p.samples.rows());
+  state.counters["triangles"] = static_cast<double>(index.mesh().face_count());
+  state.counters["queries"] = queries;
+  state.counters["queries_per_s"] =
+      benchmark::Counter(queries * static_cast<double>(state.iterations()), benchmark::Counter::kIsRate);
+}
+
+void bench_scoring(benchmark::State& state, Rung r, int threads) {
+  const SurfaceIndex& index = *rung_data(r).index;
+  const PartData& p = part_data(r.part);
+  const ThreadLimit limit(threads);
+  MovabilityOptions mo;
+  mo.samples = kSamples;
+  std::vector<double> values(p.lines.size());
+  for (auto _ : state) {
+    parallel_for(0, p.lines.size(), [&](std::size_t b, std::size_t e) {
+      std::vector<int> hints(kSamples, -1);
+      for (std::size_t k = b; k < e; ++k) {
+        std::fill(hints.begin(), hints.end(), -1);
+        values[k] = movability(index, p.lines[k].first, p.lines[k].second, mo, hints).value;
+      }
+    }, 16);
+    benchmark::DoNotOptimize(values.data());
+  }
+  state.counters["triangles"] = static_cast<double>(index.mesh().face_count());
+  state.counters["samples"] = kSamples;
+  state.counters["lines_per_s"] = benchmark::Counter(
+      static_cast<double>(p.lines.size()) * static_cast<double>(state.iterations()), benchmark::Counter::kIsRate);
+}
+
+void bench_fit(benchmark::State& state, Rung r, int threads) {
+  const PartData& p = part_data(r.part);
+  if (!p.fit_start) {
+    state.SkipWithError(p.fit_error.c_str());
+    return;
+  }
+  const SurfaceIndex& index = *rung_data(r).index;
+  const ThreadLimit limit(threads);
+  FitOptions fo;
+  fo.kind = p.fit_kind;
+  FitTiming sum;
+  long long iterations = 0;
+  for (auto _ : state) {
+    const FitResult result = fit_motion(index, *p.fit_start, fo);
+    benchmark::DoNotOptimize(result.final_cost);
+    sum.query_s += result.timing.query_s;
+    sum.assembly_s += result.timing.assembly_s;
+    sum.factor_s += result.timing.factor_s;
+    sum.total_s += result.timing.total_s;
+    sum.queries += result.timing.queries;
+    iterations += result.iterations;
+  }
+  const double n = static_cast<double>(state.iterations());
+  state.counters["triangles"] = static_cast<double>(index.mesh().face_count());
+  state.counters["gn_iterations"] = static_cast<double>(iterations) / n;
+  state.counters["samples"] = static_cast<double>(fo.samples_t) * fo.samples_s;
+  state.counters["queries"] = static_cast<double>(sum.queries) / n;
+  state.counters["query_share"] = sum.query_s / sum.total_s;
+  state.counters["assembly_share"] = sum.assembly_s / sum.total_s;
+  state.counters["factor_share"] = sum.factor_s / sum.total_s;
+}
+
+void bench_decompose(benchmark::State& state, Rung r, int threads) {
+  const Mesh& mesh = rung_data(r).mesh;
+  const PartData& p = part_data(r.part);
+  const ThreadLimit limit(threads);
+  StageTimes sum;
+  double index_s = 0, coverage = 0, patches = 0, lines_scored = 0, grown = 0;
+  for (auto _ : state) {
+    const auto t0 = std::chrono::steady_clock::now();
+    const SurfaceIndex index(mesh);
+    index_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
+    DecomposeOptions o;
+    o.tolerance = kDecomposeTolerance * index.diagonal();
+    o.kinds = p.decompose_kinds;
+    const DecomposeResult result = decompose(index, o);
+    sum.seeds += result.times.seeds, sum.candidates += result.times.candidates;
+    sum.fit += result.times.fit, sum.cover += result.times.cover;
+    coverage = result.coverage;
+    patches = static_cast<double>(result.patches.size());
+    lines_scored = static_cast<double>(result.lines_scored);
+    grown = result.grown;
+  }
+  const double n = static_cast<double>(state.iterations());
+  state.counters["triangles"] = static_cast<double>(mesh.face_count());
+  state.counters["index_s"] = index_s / n;
+  state.counters["seeds_s"] = sum.seeds / n;
+  state.counters["candidates_s"] = sum.candidates / n;
+  state.counters["fit_s"] = sum.fit / n;
+  state.counters["cover_s"] = sum.cover / n;
+  state.counters["coverage"] = coverage;
+  state.counters["patches"] = patches;
+  state.counters["lines_scored"] = lines_scored;
+  state.counters["grown"] = grown;  // candidates propagated and fitted: the fit stage's work
+}
+
+}  // namespace
+
+void register_ladder_benchmarks() {
+  std::vector<Rung> rungs;
+  for (int level : {11, 22, 45, 89, 179, 358})  // 8·level² triangles: 1k … 1M
+    rungs.push_back({Part::cone, level, 8LL * level * level});
+  try {
+    const long long base = blade_base().face_count();
+    for (int level = 1; level <= 5; ++level) rungs.push_back({Part::blade, level, base << (2 * level)});
+  } catch (const std::exception& e) {
+    std::cerr << "ladder: the blade rungs are left out: " << e.what() << "\n";
+  }
+  using Fn = void (*)(benchmark::State&, Rung, int);
+  const std::pair<const char*, Fn> stages[] = {{"index", bench_index}, {"query", bench_query},
+                                               {"scoring", bench_scoring}, {"fit", bench_fit},
+                                               {"decompose", bench_decompose}};
+  // Rung by rung, so that each mesh is built once.
+  for (const Rung& r : rungs)
+    for (const auto& [stage, fn] : stages)
+      for (int threads : {1, 2}) {
+        const std::string bench_name = std::string("Ladder/") + stage + "/" + name(r.part) + "/tri_k:" +
+                                       std::to_string(std::llround(static_cast<double>(r.triangles) / 1000.0)) +
+                                       "/threads:" + std::to_string(threads);
+        // No MinTime or Iterations here: they would become part of the name. The script passes
+        // --benchmark_min_time; decompose runs once whenever it takes longer than that.
+        benchmark::RegisterBenchmark(bench_name.c_str(), fn, r, threads)
+            ->UseRealTime()
+            ->Unit(std::string(stage) == "decompose" ? benchmark::kSecond : benchmark::kMillisecond);
+      }
+}
+
+}  // namespace flank

@@ -1,0 +1,309 @@
+#!/usr/bin/env python3
+"""Tests of scripts/scaling_report.py on small synthetic Google Benchmark JSON files.
+
+Run: /usr/bin/python3 tests/scaling_report_test.py
+"""
+
+import importlib.util
+import json
+import os
+import subprocess
+import sys
+import tempfile
+import unittest
+
+ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+SCRIPT = os.path.join(ROOT, "scripts", "scaling_report.py")
+
+spec = importlib.util.spec_from_file_location("scaling_report", SCRIPT)
+sr = importlib.util.module_from_spec(spec)
+spec.loader.exec_module(sr)
+
+try:
+    import matplotlib  # noqa: F401
+    HAVE_MATPLOTLIB = True
+except ImportError:
+    HAVE_MATPLOTLIB = False
+
+QUERY = "Ladder/query/cone/tri_k:16/threads:2"
+
+
+def aggregates(key, median_ms, cv, counters=None, reps=5):
+    """The mean/median/stddev/cv entries Google Benchmark writes for one benchmark."""
+    run_name = key + "/real_time"
+    out = []
+    for agg in ("mean", "median", "stddev", "cv"):
+        value = {"mean": median_ms, "median": median_ms,
+                 "stddev": cv * median_ms, "cv": cv}[agg]
+        entry = {
+            "name": f"{run_name}_{agg}", "family_index": 0, "per_family_instance_index": 0,
+            "run_name": run_name, "run_type": "aggregate", "repetitions": reps, "threads": 1,
+            "aggregate_name": agg, "iterations": reps, "real_time": value,
+            "cpu_time": value, "time_unit": "ms",
+        }
+        if agg == "cv":
+            entry["aggregate_unit"] = "percentage"
+        entry.update({k: (v * cv if agg == "stddev" else v) for k, v in (counters or {}).items()})
+        out.append(entry)
+    return out
+
+
+def gb_json(benchmarks, num_cpus=2):
+    """A whole Google Benchmark JSON document from {key: (median_ms, cv, counters)}."""
+    entries = []
+    for key, (ms, cv, counters) in benchmarks.items():
+        entries += aggregates(key, ms, cv, counters)
+    return {"context": {"date": "2024-01-01T00:00:00+00:00", "host_name": "testhost",
+                        "num_cpus": num_cpus, "mhz_per_cpu": 2400,
+                        "library_build_type": "release"},
+            "benchmarks": entries}
+
+
+def ladder_run():
+    """A complete two-part, three-size, two-thread ladder."""
+    out = {}
+    for part in ("cone", "blade"):
+        for tri_k in (1, 4, 16):
+            tri = tri_k * 1000.0
+            for t in (1, 2):
+                f = 1.0 if t == 1 else 0.55
+                base = f"/{part}/tri_k:{tri_k}/threads:{t}"
+                out["Ladder/index" + base] = (0.5 * tri_k * f, 0.01, {"triangles": tri})
+                out["Ladder/query" + base] = (2.0 * tri_k ** 0.2 * f, 0.02, {
+                    "triangles": tri, "queries": 10000.0,
+                    "queries_per_s": 10000 / (0.002 * tri_k ** 0.2 * f)})
+                out["Ladder/scoring" + base] = (10.0 * tri_k ** 0.1 * f, 0.02, {
+                    "triangles": tri, "samples": 30.0,
+                    "lines_per_s": 2048 / (0.01 * tri_k ** 0.1 * f)})
+                out["Ladder/fit" + base] = (50.0 * tri_k ** 0.3 * f, 0.03, {
+                    "triangles": tri, "gn_iterations": 6.0, "samples": 3000.0,
+                    "query_share": 0.4, "assembly_share": 0.3, "factor_share": 0.2,
+                    "queries": 20000.0})
+                out["Ladder/decompose" + base] = (1000.0 * tri_k ** 0.5 * f, 0.02, {
+                    "triangles": tri, "index_s": 0.01, "seeds_s": 0.05 * tri_k ** 0.5,
+                    "candidates_s": 0.3 * tri_k ** 0.5, "fit_s": 0.5 * tri_k ** 0.5,
+                    "cover_s": 0.1, "patches": 1.0, "coverage": 0.99, "lines_scored": 5e4})
+    return out
+
+
+class ScalingReportTest(unittest.TestCase):
+    def setUp(self):
+        self.tmp = tempfile.TemporaryDirectory()
+        self.dir = self.tmp.name
+
+    def tearDown(self):
+        self.tmp.cleanup()
+
+    def write(self, name, doc):
+        path = os.path.join(self.dir, name)
+        with open(path, "w", encoding="utf-8") as f:
+            f.write(doc if isinstance(doc, str) else json.dumps(doc))
+        return path
+
+    def run_cli(self, *args):
+        return subprocess.run([sys.executable, SCRIPT, *args], capture_output=True, text=True,
+                              timeout=300)
+
+    def check(self, run, base, *extra):
+        return self.run_cli("check", "--json", run, "--baseline", base, *extra)
+
+    def small(self, query_ms=10.0, cv=0.01):
+        return gb_json({
+            QUERY: (query_ms, cv, {"triangles": 16000.0}),
+            "Ladder/index/cone/tri_k:16/threads:2": (5.0, 0.01, {"triangles": 16000.0}),
+        })
+
+    # --- check -----------------------------------------------------------------------------
+
+    def test_check_identical_passes(self):
+        base = self.write("base.json", self.small())
+        run = self.write("run.json", self.small())
+        r = self.check(run, base)
+        self.assertEqual(r.returncode, 0, r.stderr)
+        self.assertIn("ok", r.stdout)
+        self.assertIn(QUERY, r.stdout)
+
+    def test_check_20_percent_slower_low_noise_fails(self):
+        base = self.write("base.json", self.small(10.0, 0.01))
+        run = self.write("run.json", self.small(12.0, 0.01))
+        r = self.check(run, base)
+        self.assertEqual(r.returncode, 1)
+        self.assertIn("SLOWER", r.stdout)
+        self.assertIn(f"{QUERY} is 20.0% slower than the baseline", r.stderr)
+        self.assertIn("limit 10% + noise 2.0%", r.stderr)
+
+    def test_check_20_percent_slower_high_noise_passes(self):
+        base = self.write("base.json", self.small(10.0, 0.10))
+        run = self.write("run.json", self.small(12.0, 0.10))
+        r = self.check(run, base)
+        self.assertEqual(r.returncode, 0, r.stderr)
+
+    def test_check_5_percent_slower_passes(self):
+        base = self.write("base.json", self.small(10.0, 0.0))
+        run = self.write("run.json", self.small(10.5, 0.0))
+        r = self.check(run, base)
+        self.assertEqual(r.returncode, 0, r.stderr)
+
+    def test_check_limit_option(self):
+        base = self.write("base.json", self.small(10.0, 0.0))
+        run = self.write("run.json", self.small(10.5, 0.0))
+        self.assertEqual(self.check(run, base, "--limit", "0.02").returncode, 1)
+
+    def test_check_faster_passes(self):
+        base = self.write("base.json", self.small(10.0, 0.01))
+        run = self.write("run.json", self.small(5.0, 0.01))
+        r = self.check(run, base)
+        self.assertEqual(r.returncode, 0, r.stderr)
+        self.assertIn("faster", r.stdout)
+
+    def test_check_missing_baseline(self):
+        run = self.write("run.json", self.small())
+        missing = os.path.join(self.dir, "nope.json")
+        r = self.check(run, missing)
+        self.assertEqual(r.returncode, 2)
+        self.assertIn("nope.json", r.stderr)
+
+    def test_check_garbage_baseline(self):
+        run = self.write("run.json", self.small())
+        garbage = self.write("garbage.json", "this is { not json")
+        r = self.check(run, garbage)
+        self.assertEqual(r.returncode, 2)
+        self.assertIn("garbage.json", r.stderr)
+
+    def test_check_baseline_without_benchmarks(self):
+        run = self.write("run.json", self.small())
+        empty = self.write("empty.json", {"context": {}, "benchmarks": []})
+        r = self.check(run, empty)
+        self.assertEqual(r.returncode, 2)
+        self.assertIn("empty.json", r.stderr)
+
+    def test_check_no_overlap(self):
+        base = self.write("base.json", gb_json({"Other/thing": (1.0, 0.0, {})}))
+        run = self.write("run.json", self.small())
+        r = self.check(run, base)
+        self.assertEqual(r.returncode, 2)
+        self.assertIn("nothing to compare", r.stderr)
+
+    def test_check_not_run_and_no_baseline(self):
+        base_doc = self.small()
+        base_doc["benchmarks"] += aggregates("Ladder/fit/cone/tri_k:16/threads:2", 50.0, 0.01)
+        base = self.write("base.json", base_doc)
+        run_doc = self.small()
+        run_doc["benchmarks"] += aggregates("Ladder/fit/blade/tri_k:16/threads:2", 50.0, 0.01)
+        run = self.write("run.json", run_doc)
+        r = self.check(run, base)
+        self.assertEqual(r.returncode, 0, r.stderr)
+        self.assertIn("not run", r.stdout)
+        self.assertIn("no baseline", r.stdout)
+
+    def test_check_warns_on_num_cpus(self):
+        base = self.write("base.json", gb_json({QUERY: (10.0, 0.01, {})}, num_cpus=8))
+        run = self.write("run.json", gb_json({QUERY: (10.0, 0.01, {})}, num_cpus=2))
+        r = self.check(run, base)
+        self.assertEqual(r.returncode, 0)
+        self.assertIn("num_cpus", r.stderr)
+
+    # --- loading and formulas --------------------------------------------------------------
+
+    def test_load_units_cv_and_counters(self):
+        doc = gb_json({QUERY: (12.5, 0.04, {"triangles": 16000.0, "queries_per_s": 8e5})})
+        _, benches = sr.load_run(self.write("run.json", doc))
+        b = benches[QUERY]
+        self.assertAlmostEqual(b.real_s, 0.0125)
+        self.assertAlmostEqual(b.cv, 0.04)
+        self.assertEqual(b.counters["queries_per_s"], 8e5)
+        self.assertEqual((b.stage, b.part, b.tri_k, b.threads), ("query", "cone", 16, 2))
+        self.assertEqual(b.repetitions, 5)
+
+    def test_load_cv_from_stddev_and_seconds(self):
+        entries = [e for e in aggregates(QUERY, 2.0, 0.05) if e["aggregate_name"] != "cv"]
+        for e in entries:
+            e["time_unit"] = "s"
+        _, benches = sr.load_run(self.write("run.json", {"benchmarks": entries}))
+        self.assertAlmostEqual(benches[QUERY].real_s, 2.0)
+        self.assertAlmostEqual(benches[QUERY].cv, 0.05)
+
+    def test_load_plain_iteration(self):
+        entry = {"name": QUERY, "run_name": QUERY, "run_type": "iteration", "repetitions": 1,
+                 "iterations": 3, "real_time": 250.0, "cpu_time": 240.0, "time_unit": "ms",
+                 "triangles": 16000.0}
+        _, benches = sr.load_run(self.write("run.json", {"benchmarks": [entry]}))
+        self.assertAlmostEqual(benches[QUERY].real_s, 0.25)
+        self.assertEqual(benches[QUERY].cv, 0.0)
+        self.assertEqual(benches[QUERY].triangles, 16000.0)
+
+    def test_formulas(self):
+        # 1000 lines/s x 30 samples = 30,000 sample queries/s vs 120,000 raw: 0.25.
+        self.assertAlmostEqual(sr.sample_query_ratio(1000.0, 30.0, 120000.0), 0.25)
+        # 1.8 s on 1 thread, 1.0 s on 2: speed-up 1.8, efficiency 0.9.
+        self.assertAlmostEqual(sr.speedup(1.8, 1.0), 1.8)
+        self.assertAlmostEqual(sr.parallel_efficiency(1.8, 1.0), 0.9)
+        # 5 iterations x 3000 samples at 1e6 queries/s = 15 ms unavoidable; 60 ms fit: 4.
+        self.assertAlmostEqual(sr.unavoidable_query_s(5, 3000, 1e6), 0.015)
+        self.assertAlmostEqual(sr.fit_over_unavoidable(0.060, 5, 3000, 1e6), 4.0)
+        self.assertIsNone(sr.sample_query_ratio(1000.0, 30.0, None))
+        self.assertIsNone(sr.fit_over_unavoidable(0.06, 5, 3000, 0.0))
+
+    def test_slope(self):
+        pts = [(1e3, 2e-3), (1e4, 2e-2), (1e5, 2e-1)]
+        self.assertAlmostEqual(sr.slope(pts), 1.0)
+        self.assertIsNone(sr.slope([(1e3, 1.0)]))
+
+    def test_rows_on_ladder(self):
+        _, benches = sr.load_run(self.write("run.json", gb_json(ladder_run())))
+        lad = sr.ladder(benches)
+        rows = {(r["part"], r["tri_k"], r["threads"]): r for r in sr.scoring_rows(lad)}
+        r = rows[("cone", 16, 2)]
+        lps = 2048 / (0.01 * 16 ** 0.1 * 0.55)
+        qps = 10000 / (0.002 * 16 ** 0.2 * 0.55)
+        self.assertAlmostEqual(r["ratio"], lps * 30 / qps)
+        par = {r["benchmark"]: r for r in sr.parallel_rows(benches)}
+        self.assertAlmostEqual(par["Ladder/index/cone/tri_k:4"]["efficiency"], 1 / (2 * 0.55))
+        fit = {(r["part"], r["tri_k"], r["threads"]): r for r in sr.fit_rows(lad)}
+        f = fit[("blade", 4, 1)]
+        fit_s = 0.050 * 4 ** 0.3
+        qps = 10000 / (0.002 * 4 ** 0.2)
+        self.assertAlmostEqual(f["fit_over_unavoidable"], fit_s / (6 * 3000 / qps))
+        slopes = {(r["part"], r["stage"]): r for r in sr.slope_rows(lad)}
+        self.assertAlmostEqual(slopes[("cone", "index")]["slope_threads_2"], 1.0)
+        self.assertAlmostEqual(slopes[("blade", "decompose: fit+grow")]["slope_threads_1"], 0.5)
+
+    def test_sig3(self):
+        self.assertEqual(sr.sig3(0.123456), "0.123")
+        self.assertEqual(sr.sig3(12.345), "12.3")
+        self.assertEqual(sr.sig3(1234.5), "1230")
+        self.assertEqual(sr.sig3(2.345e7), "2.35e7")
+        self.assertEqual(sr.sig3(None), "n/a")
+        self.assertEqual(sr.human_time(0.0123), "12.3 ms")
+
+    # --- report ----------------------------------------------------------------------------
+
+    @unittest.skipUnless(HAVE_MATPLOTLIB, "matplotlib is not installed")
+    def test_report_writes_everything(self):
+        run = self.write("run.json", gb_json(ladder_run()))
+        slower = {k: (ms * 1.1, cv, c) for k, (ms, cv, c) in ladder_run().items()}
+        del slower["Ladder/fit/blade/tri_k:16/threads:2"]
+        base = self.write("base.json", gb_json(slower))
+        out = os.path.join(self.dir, "report")
+        r = self.run_cli("report", "--json", run, "-o", out, "--baseline", base,
+                         "--title", "Test ladder")
+        self.assertEqual(r.returncode, 0, r.stderr)
+        self.assertEqual(r.stdout.strip(), os.path.join(out, "report.md"))
+        for name in ("stages.png", "speedup.png", "scoring_vs_queries.png", "gn_share.png"):
+            path = os.path.join(out, name)
+            self.assertTrue(os.path.isfile(path), name)
+            self.assertGreater(os.path.getsize(path), 1000, name)
+        with open(os.path.join(out, "report.md"), encoding="utf-8") as f:
+            md = f.read()
+        self.assertIn("# Test ladder", md)
+        self.assertIn("![stages](stages.png)", md)
+        self.assertIn("Ratios against limits (same run)", md)
+        self.assertIn("testhost", md)
+        with open(os.path.join(out, "summary.json"), encoding="utf-8") as f:
+            summary = json.load(f)
+        for section in ("scoring_vs_queries", "parallel", "fit_vs_unavoidable", "slopes"):
+            self.assertTrue(summary[section], section)
+
+
+if __name__ == "__main__":
+    unittest.main()
