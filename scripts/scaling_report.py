@@ -614,7 +614,9 @@ def build_markdown(title, run_path, context, benches, base_path, base, lad):
                f"Google Benchmark library build: {context.get('library_build_type', 'n/a')}")
     out.append(f"- flank commit: {context.get('commit', 'n/a')}; mode: {context.get('mode', 'n/a')}; "
                f"machine: {context.get('machine', 'n/a')}")
-    out.append(f"- Repetitions: {_rep_text(benches)} (all values are medians; cv = stddev / mean "
+    where = ("one process each; " if context.get("repetition_processes")
+             else "in one process; ")
+    out.append(f"- Repetitions: {_rep_text(benches)} ({where}all values are medians; cv = stddev / mean "
                "of the repetitions' real time)")
     if base_path:
         out.append(f"- Baseline: `{base_path}`")
@@ -791,7 +793,8 @@ def cmd_check(args):
               f"baseline {base_ctx.get('num_cpus')}); timings may not be comparable",
               file=sys.stderr)
     failures = []
-    for key, status, ratio, noise in compare(run, base, args.limit, args.noise_k):
+    rows = compare(run, base, args.limit, args.noise_k)
+    for key, status, ratio, noise in rows:
         if ratio is None:
             print(f"{status:<11} {key}")
             continue
@@ -799,11 +802,52 @@ def cmd_check(args):
               f"threshold {1 + args.limit + noise:.3f}")
         if status == "SLOWER":
             failures.append((key, ratio, noise))
+    compared = sum(1 for _, _, ratio, _ in rows if ratio is not None)
+    print(f"{PROG} --check: {compared} benchmarks compared, {len(failures)} slower than the "
+          f"baseline beyond {100 * args.limit:g}% + noise")
     sys.stdout.flush()
     for key, ratio, noise in failures:
         print(f"{PROG} --check: {key} is {100 * (ratio - 1):.1f}% slower than the baseline "
               f"(limit {100 * args.limit:g}% + noise {100 * noise:.1f}%)", file=sys.stderr)
     return 1 if failures else 0
+
+
+def merge_runs(paths):
+    """One Google Benchmark JSON document from several runs of the same binary, one process
+    each: their iteration entries side by side, numbered as repetitions, so that the median
+    and cv are taken across processes (which also varies the memory layout of the meshes and
+    spreads the repetitions over the whole run, unlike repetitions inside one process)."""
+    merged, context = [], None
+    for index, path in enumerate(paths):
+        try:
+            with open(path, encoding="utf-8") as f:
+                data = json.load(f)
+        except OSError as e:
+            raise InputError(f"{path}: cannot read it ({e.strerror or e})") from None
+        except ValueError as e:
+            raise InputError(f"{path}: not valid JSON ({e})") from None
+        if not isinstance(data, dict) or not isinstance(data.get("benchmarks"), list):
+            raise InputError(f"{path}: no \"benchmarks\" list (not Google Benchmark JSON output)")
+        if context is None:
+            context = data.get("context", {})
+        for entry in data["benchmarks"]:
+            if isinstance(entry, dict) and entry.get("run_type", "iteration") == "iteration":
+                merged.append(dict(entry, repetitions=len(paths), repetition_index=index))
+    context = dict(context or {}, repetition_processes=len(paths))
+    return {"context": context, "benchmarks": merged}
+
+
+def cmd_merge(args):
+    try:
+        doc = merge_runs(args.inputs)
+    except InputError as e:
+        print(f"{PROG} merge: {e}", file=sys.stderr)
+        return 2
+    tmp = args.output + ".tmp"
+    with open(tmp, "w", encoding="utf-8") as f:
+        json.dump(doc, f, indent=1)
+    os.replace(tmp, args.output)
+    return 0
 
 
 # ----------------------------------------------------------------------------- main
@@ -823,8 +867,13 @@ def main(argv=None):
                      help="allowed slow-down as a fraction (default 0.10)")
     chk.add_argument("--noise-k", type=float, default=2.0,
                      help="noise allowance = K x max(cv run, cv baseline) (default 2)")
+    mrg = sub.add_parser("merge", help="one JSON from runs of the benchmark binary, one "
+                         "process per repetition")
+    mrg.add_argument("-o", "--output", required=True, help="merged JSON file")
+    mrg.add_argument("inputs", nargs="+", help="Google Benchmark JSON of each run")
     args = parser.parse_args(argv)
-    return cmd_report(args) if args.command == "report" else cmd_check(args)
+    commands = {"report": cmd_report, "check": cmd_check, "merge": cmd_merge}
+    return commands[args.command](args)
 
 
 if __name__ == "__main__":

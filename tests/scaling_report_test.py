@@ -113,6 +113,39 @@ class ScalingReportTest(unittest.TestCase):
             "Ladder/index/cone/tri_k:16/threads:2": (5.0, 0.01, {"triangles": 16000.0}),
         })
 
+    # --- merge (one process per repetition) ---------------------------------------------------
+
+    def iteration_run(self, ms, counter):
+        entry = {"name": QUERY + "/real_time", "run_name": QUERY + "/real_time",
+                 "run_type": "iteration", "repetitions": 1, "repetition_index": 0,
+                 "iterations": 10, "real_time": ms, "cpu_time": ms, "time_unit": "ms",
+                 "triangles": 16000.0, "queries_per_s": counter}
+        return {"context": {"num_cpus": 2, "commit": "abc"}, "benchmarks": [entry]}
+
+    def test_merge_takes_median_and_cv_across_processes(self):
+        paths = [self.write(f"run{i}.json", self.iteration_run(ms, 1000.0 / ms))
+                 for i, ms in enumerate((10.0, 12.0, 11.0))]
+        merged = os.path.join(self.dir, "merged.json")
+        r = self.run_cli("merge", "-o", merged, *paths)
+        self.assertEqual(r.returncode, 0, r.stderr)
+        context, benches = sr.load_run(merged)
+        self.assertEqual(context["repetition_processes"], 3)
+        self.assertEqual(context["commit"], "abc")
+        b = benches[QUERY]
+        self.assertEqual(b.repetitions, 3)
+        self.assertAlmostEqual(b.real_s, 0.011)
+        self.assertAlmostEqual(b.cv, 1.0 / 11.0)  # stdev(10, 12, 11) / mean
+        self.assertAlmostEqual(b.counters["queries_per_s"], 1000.0 / 11.0)
+
+    def test_merge_bad_input(self):
+        good = self.write("good.json", self.iteration_run(10.0, 100.0))
+        bad = self.write("bad.json", "{ truncated")
+        merged = os.path.join(self.dir, "merged.json")
+        r = self.run_cli("merge", "-o", merged, good, bad)
+        self.assertEqual(r.returncode, 2)
+        self.assertIn("bad.json", r.stderr)
+        self.assertFalse(os.path.exists(merged))
+
     # --- check -----------------------------------------------------------------------------
 
     def test_check_identical_passes(self):
