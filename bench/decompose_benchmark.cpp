@@ -2,10 +2,10 @@
 // part) of about 13k, 50k and 200k vertices, 1 and 2 threads, with the time split per stage.
 #include <benchmark/benchmark.h>
 
-#include <chrono>
 #include <map>
 #include <memory>
 
+#include "bench/runs.h"
 #include "kernels/parallel.h"
 #include "solver/decompose.h"
 #include "solver/synth.h"
@@ -36,29 +36,7 @@ const Mesh& part(int kilo_vertices) {
 void BM_Decompose(benchmark::State& state) {
   const Mesh& mesh = part(static_cast<int>(state.range(0)));
   ThreadLimit limit(static_cast<int>(state.range(1)));
-  StageTimes sum;
-  double index_s = 0, coverage = 0, patches = 0;
-  for (auto _ : state) {
-    const auto t0 = std::chrono::steady_clock::now();
-    const SurfaceIndex index(mesh);
-    index_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    DecomposeOptions o;
-    o.tolerance = 1e-4 * index.diagonal();
-    const DecomposeResult r = decompose(index, o);
-    sum.seeds += r.times.seeds, sum.candidates += r.times.candidates;
-    sum.fit += r.times.fit, sum.cover += r.times.cover;
-    coverage = r.coverage;
-    patches = static_cast<double>(r.patches.size());
-  }
-  const double n = static_cast<double>(state.iterations());
-  state.counters["vertices"] = static_cast<double>(mesh.vertex_count());
-  state.counters["index_s"] = index_s / n;
-  state.counters["seeds_s"] = sum.seeds / n;
-  state.counters["candidates_s"] = sum.candidates / n;
-  state.counters["fit_s"] = sum.fit / n;
-  state.counters["cover_s"] = sum.cover / n;
-  state.counters["coverage"] = coverage;
-  state.counters["patches"] = patches;
+  bench::run_decompose(state, mesh, 1e-4, {CutterKind::cone});
 }
 BENCHMARK(BM_Decompose)
     ->ArgNames({"kverts", "threads"})

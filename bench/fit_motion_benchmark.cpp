@@ -6,6 +6,7 @@
 #include <numbers>
 #include <vector>
 
+#include "bench/runs.h"
 #include "kernels/parallel.h"
 #include "solver/fit_motion.h"
 #include "solver/propagate.h"
@@ -38,23 +39,7 @@ void BM_FitMotion(benchmark::State& state) {
   ThreadLimit limit(static_cast<int>(state.range(0)));
   FitOptions fo;
   fo.kind = CutterKind::cone;
-  FitTiming sum;
-  int iterations = 0;
-  for (auto _ : state) {
-    const FitResult r = fit_motion(index, init, fo);
-    benchmark::DoNotOptimize(r.final_cost);
-    sum.query_s += r.timing.query_s;
-    sum.assembly_s += r.timing.assembly_s;
-    sum.factor_s += r.timing.factor_s;
-    sum.total_s += r.timing.total_s;
-    iterations += r.iterations;
-  }
-  const double n = static_cast<double>(state.iterations());
-  state.counters["gn_iterations"] = iterations / n;
-  state.counters["query_share"] = sum.query_s / sum.total_s;
-  state.counters["assembly_share"] = sum.assembly_s / sum.total_s;
-  state.counters["factor_share"] = sum.factor_s / sum.total_s;
-  state.counters["ms_per_iteration"] = 1e3 * sum.total_s / std::max(1, iterations);
+  bench::run_fit(state, index, init, fo);
 }
 BENCHMARK(BM_FitMotion)->Arg(1)->Arg(2)->UseRealTime()->Unit(benchmark::kMillisecond);
 

@@ -21,7 +21,6 @@
 
 #include <benchmark/benchmark.h>
 
-#include <chrono>
 #include <cmath>
 #include <iostream>
 #include <map>
@@ -33,6 +32,7 @@
 #include <string>
 #include <vector>
 
+#include "bench/runs.h"
 #include "io/read_mesh.h"
 #include "kernels/mesh.h"
 #include "kernels/movability.h"
@@ -261,60 +261,14 @@ void bench_fit(benchmark::State& state, Rung r, int threads) {
   const ThreadLimit limit(threads);
   FitOptions fo;
   fo.kind = p.fit_kind;
-  FitTiming sum;
-  long long iterations = 0;
-  for (auto _ : state) {
-    const FitResult result = fit_motion(index, *p.fit_start, fo);
-    benchmark::DoNotOptimize(result.final_cost);
-    sum.query_s += result.timing.query_s;
-    sum.assembly_s += result.timing.assembly_s;
-    sum.factor_s += result.timing.factor_s;
-    sum.total_s += result.timing.total_s;
-    sum.queries += result.timing.queries;
-    iterations += result.iterations;
-  }
-  const double n = static_cast<double>(state.iterations());
-  state.counters["triangles"] = static_cast<double>(index.mesh().face_count());
-  state.counters["gn_iterations"] = static_cast<double>(iterations) / n;
-  state.counters["samples"] = static_cast<double>(fo.samples_t) * fo.samples_s;
-  state.counters["queries"] = static_cast<double>(sum.queries) / n;
-  state.counters["query_share"] = sum.query_s / sum.total_s;
-  state.counters["assembly_share"] = sum.assembly_s / sum.total_s;
-  state.counters["factor_share"] = sum.factor_s / sum.total_s;
+  bench::run_fit(state, index, *p.fit_start, fo);
 }
 
 void bench_decompose(benchmark::State& state, Rung r, int threads) {
   const Mesh& mesh = rung_data(r).mesh;
   const PartData& p = part_data(r.part);
   const ThreadLimit limit(threads);
-  StageTimes sum;
-  double index_s = 0, coverage = 0, patches = 0, lines_scored = 0, grown = 0;
-  for (auto _ : state) {
-    const auto t0 = std::chrono::steady_clock::now();
-    const SurfaceIndex index(mesh);
-    index_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - t0).count();
-    DecomposeOptions o;
-    o.tolerance = kDecomposeTolerance * index.diagonal();
-    o.kinds = p.decompose_kinds;
-    const DecomposeResult result = decompose(index, o);
-    sum.seeds += result.times.seeds, sum.candidates += result.times.candidates;
-    sum.fit += result.times.fit, sum.cover += result.times.cover;
-    coverage = result.coverage;
-    patches = static_cast<double>(result.patches.size());
-    lines_scored = static_cast<double>(result.lines_scored);
-    grown = result.grown;
-  }
-  const double n = static_cast<double>(state.iterations());
-  state.counters["triangles"] = static_cast<double>(mesh.face_count());
-  state.counters["index_s"] = index_s / n;
-  state.counters["seeds_s"] = sum.seeds / n;
-  state.counters["candidates_s"] = sum.candidates / n;
-  state.counters["fit_s"] = sum.fit / n;
-  state.counters["cover_s"] = sum.cover / n;
-  state.counters["coverage"] = coverage;
-  state.counters["patches"] = patches;
-  state.counters["lines_scored"] = lines_scored;
-  state.counters["grown"] = grown;  // candidates propagated and fitted: the fit stage's work
+  bench::run_decompose(state, mesh, kDecomposeTolerance, p.decompose_kinds);
 }
 
 }  // namespace

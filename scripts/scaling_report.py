@@ -133,8 +133,8 @@ def _from_iterations(key, runs):
     return Bench(key, statistics.median(reals), statistics.median(cpus), cv, len(runs), counters)
 
 
-def load_run(path):
-    """(context, {key: Bench}) from a Google Benchmark JSON file; InputError if unusable."""
+def read_gb_json(path):
+    """The parsed Google Benchmark JSON document; InputError naming the file if unusable."""
     try:
         with open(path, encoding="utf-8") as f:
             data = json.load(f)
@@ -144,6 +144,12 @@ def load_run(path):
         raise InputError(f"{path}: not valid JSON ({e})") from None
     if not isinstance(data, dict) or not isinstance(data.get("benchmarks"), list):
         raise InputError(f"{path}: no \"benchmarks\" list (not Google Benchmark JSON output)")
+    return data
+
+
+def load_run(path):
+    """(context, {key: Bench}) from a Google Benchmark JSON file; InputError if unusable."""
+    data = read_gb_json(path)
     groups = {}
     for entry in data["benchmarks"]:
         if not isinstance(entry, dict) or entry.get("error_occurred") or entry.get("skipped"):
@@ -425,6 +431,20 @@ def _slope_text(s):
     return "n/a" if s is None else f"{s:.2f}"
 
 
+def _decorate(ax, ylabel, title, legend_columns):
+    """Triangles on x, grid, and the legend below the panel."""
+    ax.set_xlabel("triangles")
+    ax.set_ylabel(ylabel)
+    ax.set_title(title, fontsize=10)
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=legend_columns, fontsize=8)
+
+
+def _save(plt, fig, path):
+    fig.savefig(path, dpi=110, bbox_inches="tight")
+    plt.close(fig)
+
+
 def plot_stages(plt, lad, path):
     """Log-log time vs triangles per part; solid 2 threads, dashed 1 thread."""
     parts = parts_of(lad)
@@ -446,13 +466,9 @@ def plot_stages(plt, lad, path):
             continue
         _log_x(ax)
         ax.set_yscale("log")
-        ax.set_xlabel("triangles")
-        ax.set_ylabel("median time (s)")
-        ax.set_title(f"{part}: time per stage (solid 2 threads, dashed 1 thread)", fontsize=10)
-        ax.grid(True, which="both", alpha=0.3)
-        ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=2, fontsize=8)
-    fig.savefig(path, dpi=110, bbox_inches="tight")
-    plt.close(fig)
+        _decorate(ax, "median time (s)",
+                  f"{part}: time per stage (solid 2 threads, dashed 1 thread)", 2)
+    _save(plt, fig, path)
 
 
 def plot_speedup(plt, lad, path):
@@ -473,13 +489,8 @@ def plot_speedup(plt, lad, path):
         ax.axhline(1.0, color="grey", linestyle=":", linewidth=0.8)
         _log_x(ax)
         ax.set_ylim(0, ymax)
-        ax.set_xlabel("triangles")
-        ax.set_ylabel("speed-up  t(1 thread) / t(2 threads)")
-        ax.set_title(f"{part}: 2-thread speed-up", fontsize=10)
-        ax.grid(True, which="both", alpha=0.3)
-        ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.14), ncol=3, fontsize=8)
-    fig.savefig(path, dpi=110, bbox_inches="tight")
-    plt.close(fig)
+        _decorate(ax, "speed-up  t(1 thread) / t(2 threads)", f"{part}: 2-thread speed-up", 3)
+    _save(plt, fig, path)
 
 
 def plot_scoring_vs_queries(plt, lad, path):
@@ -530,8 +541,7 @@ def plot_scoring_vs_queries(plt, lad, path):
     if handles:
         fig.legend(list(handles.values()), list(handles), loc="lower center",
                    bbox_to_anchor=(0.5, 1.0), ncol=4, fontsize=8)
-    fig.savefig(path, dpi=110, bbox_inches="tight")
-    plt.close(fig)
+    _save(plt, fig, path)
 
 
 def plot_gn_share(plt, lad, path):
@@ -563,8 +573,7 @@ def plot_gn_share(plt, lad, path):
         ax.set_title(f"fit time shares, {t} thread{'s' if t > 1 else ''}", fontsize=10)
         ax.legend(loc="upper left", bbox_to_anchor=(1.01, 1.0), fontsize=8)
     fig.tight_layout()
-    fig.savefig(path, dpi=110, bbox_inches="tight")
-    plt.close(fig)
+    _save(plt, fig, path)
 
 
 # ----------------------------------------------------------------------------- report
@@ -819,15 +828,7 @@ def merge_runs(paths):
     spreads the repetitions over the whole run, unlike repetitions inside one process)."""
     merged, context = [], None
     for index, path in enumerate(paths):
-        try:
-            with open(path, encoding="utf-8") as f:
-                data = json.load(f)
-        except OSError as e:
-            raise InputError(f"{path}: cannot read it ({e.strerror or e})") from None
-        except ValueError as e:
-            raise InputError(f"{path}: not valid JSON ({e})") from None
-        if not isinstance(data, dict) or not isinstance(data.get("benchmarks"), list):
-            raise InputError(f"{path}: no \"benchmarks\" list (not Google Benchmark JSON output)")
+        data = read_gb_json(path)
         if context is None:
             context = data.get("context", {})
         for entry in data["benchmarks"]:
