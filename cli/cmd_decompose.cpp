@@ -140,14 +140,7 @@ void register_decompose(CLI::App& app, int* exit_code) {
   cmd->add_option("--coverage", a->coverage, "Stop when this fraction of the area is covered (default 0.95)")
       ->check(CLI::Range(0.01, 1.0));
   cmd->add_option("--max-patches", a->max_patches, "At most this many patches (default 20)")->check(CLI::Range(1, 10000));
-  cmd->callback([=]() {
-    try {
-      *exit_code = run_decompose(*a);
-    } catch (const std::exception& e) {
-      std::fprintf(stderr, "flank decompose: %s\n", e.what());
-      *exit_code = 2;
-    }
-  });
+  set_action(cmd, exit_code, [a] { return run_decompose(*a); });
 }
 
 }  // namespace flank::cli

@@ -168,14 +168,7 @@ void register_fit(CLI::App& app, int* exit_code) {
       ->check(CLI::Range(4, 200));
   cmd->add_option("--samples-t", a->samples_t, "Samples along the motion (default 100)")->check(CLI::Range(8, 100000));
   cmd->add_option("--samples-s", a->samples_s, "Samples along the axis (default 30)")->check(CLI::Range(4, 10000));
-  cmd->callback([=]() {
-    try {
-      *exit_code = run_fit(*a);
-    } catch (const std::exception& e) {
-      std::fprintf(stderr, "flank fit: %s\n", e.what());
-      *exit_code = 2;
-    }
-  });
+  set_action(cmd, exit_code, [a] { return run_fit(*a); });
 }
 
 }  // namespace flank::cli

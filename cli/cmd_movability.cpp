@@ -48,29 +48,24 @@ void register_movability(CLI::App& app, int* exit_code) {
   cmd->add_flag("--refine", args->refine, "Also search the endpoints' neighbourhoods for a better line");
   cmd->add_option("--threads", args->threads, "Worker threads (default: all cores)")->check(CLI::Range(1, 1024));
   cmd->add_flag("--flip", args->flip, "Reverse the surface orientation");
-  cmd->callback([=]() {
-    try {
-      const Line line = parse_line(args->line, "--line");
-      ThreadLimit limit(args->threads);
-      io::ReadOptions ro;
-      ro.flip = args->flip;
-      const io::LoadedMesh lm = io::read_mesh(args->mesh, ro);
-      const SurfaceIndex index(lm.mesh);
-      MovabilityOptions mo;
-      mo.samples = args->samples;
-      print("given  ", line, movability(index, line.a, line.b, mo));
-      if (args->refine) {
-        RefineLineOptions ro2;
-        ro2.movability = mo;
-        const RefinedLine best = refine_line(index, line, ro2);
-        print("refined", best.line, best.movability);
-        std::printf("refined evaluated  %d lines\n", best.evaluated);
-      }
-      *exit_code = 0;
-    } catch (const std::exception& e) {
-      std::fprintf(stderr, "flank movability: %s\n", e.what());
-      *exit_code = 2;
+  set_action(cmd, exit_code, [=] {
+    const Line line = parse_line(args->line, "--line");
+    ThreadLimit limit(args->threads);
+    io::ReadOptions ro;
+    ro.flip = args->flip;
+    const io::LoadedMesh lm = io::read_mesh(args->mesh, ro);
+    const SurfaceIndex index(lm.mesh);
+    MovabilityOptions mo;
+    mo.samples = args->samples;
+    print("given  ", line, movability(index, line.a, line.b, mo));
+    if (args->refine) {
+      RefineLineOptions ro2;
+      ro2.movability = mo;
+      const RefinedLine best = refine_line(index, line, ro2);
+      print("refined", best.line, best.movability);
+      std::printf("refined evaluated  %d lines\n", best.evaluated);
     }
+    return 0;
   });
 }
 

@@ -222,16 +222,9 @@ void register_synth(CLI::App& app, int* exit_code) {
   sub->add_option("-o,--output", args->output, "Output mesh (.stl, .obj or .ply)")
       ->type_name("MESH")
       ->required();
-  sub->callback([args, length, exit_code]() {
-    try {
-      run_synth(*args, length->count() > 0);
-    } catch (const std::exception& e) {
-      std::cerr << "flank synth: " << e.what() << std::endl;
-      *exit_code = 2;
-    } catch (...) {
-      std::cerr << "flank synth: unexpected error" << std::endl;
-      *exit_code = 2;
-    }
+  set_action(sub, exit_code, [args, length] {
+    run_synth(*args, length->count() > 0);
+    return 0;
   });
 }
 

@@ -68,6 +68,20 @@ std::vector<Line> read_lines_file(const std::string& path) {
   return lines;
 }
 
+void set_action(CLI::App* cmd, int* exit_code, std::function<int()> run) {
+  cmd->callback([cmd, exit_code, run = std::move(run)]() {
+    try {
+      *exit_code = run();
+    } catch (const std::exception& e) {
+      std::fprintf(stderr, "flank %s: %s\n", cmd->get_name().c_str(), e.what());
+      *exit_code = 2;
+    } catch (...) {
+      std::fprintf(stderr, "flank %s: unexpected error\n", cmd->get_name().c_str());
+      *exit_code = 2;
+    }
+  });
+}
+
 Progress::Progress(std::string command, bool quiet)
     : command_(std::move(command)), quiet_(quiet), start_(std::chrono::steady_clock::now()) {}
 

@@ -3,6 +3,7 @@
 #pragma once
 
 #include <chrono>
+#include <functional>
 #include <optional>
 #include <stdexcept>
 #include <string>
@@ -38,6 +39,10 @@ class UsageError : public std::runtime_error {
  public:
   using std::runtime_error::runtime_error;
 };
+
+// Makes `run` the subcommand's action: its return value is the exit code, and any exception
+// becomes one line "flank CMD: message" on stderr and exit code 2.
+void set_action(CLI::App* cmd, int* exit_code, std::function<int()> run);
 
 // "x0,y0,z0,x1,y1,z1" → Line; throws UsageError naming the option.
 Line parse_line(const std::string& text, const std::string& option);
