@@ -2,6 +2,7 @@
 // ordered lines (surface-driven, §4.4) — fitted, trimmed, evaluated and written out.
 #include <CLI/CLI.hpp>
 #include <cstdio>
+#include <cstdlib>
 #include <optional>
 
 #include "cli/commands.h"
@@ -17,8 +18,13 @@ namespace flank::cli {
 
 namespace {
 
+// Allowed sphere radii when --radius is not given, as fractions of Φ's bbox diagonal: the
+// same range as decompose's.
+constexpr double kDefaultRadiusMin = 0.01;
+constexpr double kDefaultRadiusMax = 0.10;
+
 struct FitArgs : PatchArgs {
-  std::string line, lines_file, tool = "cone";
+  std::string line, lines_file, tool = "cone", radius;
   int control_points = 40, samples_t = 100, samples_s = 30;
 };
 
@@ -46,6 +52,12 @@ int run_fit(const FitArgs& a) {
     throw UsageError("give exactly one of --line and --lines");
   std::optional<std::pair<double, double>> holder;
   if (!a.holder.empty()) holder = parse_pair(a.holder, "--holder");
+  std::optional<std::pair<double, double>> radius;
+  if (!a.radius.empty()) {
+    radius = parse_pair(a.radius, "--radius");
+    if (radius->first > radius->second)
+      throw UsageError("--radius MIN,MAX needs MIN <= MAX, not " + a.radius);
+  }
   std::optional<Line> user_line;
   if (!a.line.empty()) user_line = parse_line(a.line, "--line");
   std::vector<Line> user_lines;
@@ -63,7 +75,10 @@ int run_fit(const FitArgs& a) {
   const double index_s = progress.elapsed() - t_index;
   const double diagonal = index.diagonal();
   const double tol = resolve_tolerance(a.tolerance, a.tolerance_rel, diagonal);
-  progress.stage("indexed; tolerance " + std::to_string(tol) + " mm");
+  const double radius_min = radius ? radius->first : kDefaultRadiusMin * diagonal;
+  const double radius_max = radius ? radius->second : kDefaultRadiusMax * diagonal;
+  progress.stage("indexed; tolerance " + std::to_string(tol) + " mm, sphere radii " +
+                 std::to_string(radius_min) + ".." + std::to_string(radius_max) + " mm");
 
   Motion init;
   std::vector<io::Setting> settings;
@@ -92,6 +107,11 @@ int run_fit(const FitArgs& a) {
   fo.fit.control_points = a.control_points;
   fo.fit.samples_t = a.samples_t;
   fo.fit.samples_s = a.samples_s;
+  fo.fit.radius_min = radius_min;  // kept inside the fit: the cutter stays a real tool
+  fo.fit.radius_max = radius_max;
+  // The library traces through a callback; the environment switch lives here, at the edge.
+  if (std::getenv("FLANK_TRACE_FIT"))
+    fo.fit.trace = [](const std::string& line) { std::fprintf(stderr, "%s\n", line.c_str()); };
   fo.tolerance = tol;
   if (std::string e = fo.validate(); !e.empty()) throw UsageError(e);
   const FitPatchResult fit = fit_and_trim(index, init, fo);
@@ -119,6 +139,7 @@ int run_fit(const FitArgs& a) {
   settings.insert(settings.begin(), {"command", std::string("fit")});
   settings.push_back({"tolerance", tol});
   settings.push_back({"tool", a.tool});
+  settings.push_back({"radius", std::vector<double>{fo.fit.radius_min, fo.fit.radius_max}});
   settings.push_back({"control_points", static_cast<long long>(a.control_points)});
   settings.push_back({"samples", std::vector<double>{double(a.samples_t), double(a.samples_s)}});
   settings.push_back({"weights", std::vector<double>{fo.fit.weight_plane, fo.fit.weight_fair,
@@ -164,6 +185,9 @@ void register_fit(CLI::App& app, int* exit_code) {
                   "Surface-driven start: a text file, one axis per row 'x0 y0 z0 x1 y1 z1', in "
                   "the order the cutter should pass them");
   cmd->add_option("--tool", a->tool, "Cutter shape: cylinder, cone, barrel or spline (default cone)");
+  cmd->add_option("--radius", a->radius,
+                  "Allowed cutter (sphere) radii MIN,MAX in mm, kept during the fit (default 1%..10% "
+                  "of the diagonal)");
   cmd->add_option("--control-points", a->control_points, "B-spline control points per axis end curve (default 40)")
       ->check(CLI::Range(4, 200));
   cmd->add_option("--samples-t", a->samples_t, "Samples along the motion (default 100)")->check(CLI::Range(8, 100000));

@@ -1,10 +1,13 @@
 #include "solver/fit_motion.h"
 
+#include <Eigen/Cholesky>
 #include <algorithm>
+#include <cassert>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
-#include <cstdlib>
+#include <limits>
+#include <numeric>
 #include <sstream>
 #include <vector>
 
@@ -24,6 +27,16 @@ std::string FitOptions::validate() const {
   if (max_iterations < 1) return "fit needs at least one iteration";
   if (fair_iterations < 0) return "fair_iterations must not be negative";
   if (length < 0 || scale < 0) return "length and scale must not be negative";
+  if (!(radius_min >= 0) || !(radius_max >= 0) || !std::isfinite(radius_min) || !std::isfinite(radius_max))
+    return "cutter radius bounds must be finite and not negative";
+  if (radius_max > 0 && radius_min > radius_max) {
+    std::ostringstream s;
+    s << "the cutter radius range is empty: radius_min " << radius_min << " > radius_max " << radius_max;
+    return s.str();
+  }
+  if (!(max_slope_fraction >= 0 && max_slope_fraction < 1))
+    return "max_slope_fraction must be in [0, 1): |d'| must stay below the cutter length";
+  if (active_set_iterations < 1) return "active_set_iterations must be at least 1";
   return {};
 }
 
@@ -42,6 +55,9 @@ std::string FitResult::brief_report() const {
   std::ostringstream s;
   s << to_string(status) << " after " << iterations << " iterations, cost " << initial_cost
     << " -> " << final_cost << ", " << to_string(cutter.kind) << " L=" << length;
+  if (radius_at_min) s << ", radius at its lower bound";
+  if (radius_at_max) s << ", radius at its upper bound";
+  if (slope_at_limit) s << ", slope at its limit";
   return s.str();
 }
 
@@ -214,6 +230,95 @@ Evaluation evaluate(Problem& pb, const VecX& x, std::vector<int>& hints, FitTimi
   return ev;
 }
 
+// The cutter constraints of FitOptions as linear inequalities G c ≤ h on the profile
+// coefficients. Both profile bases are non-negative and sum to one (Bernstein; clamped
+// B-spline), so d(s) is a convex combination of the c_k and lo ≤ c_k ≤ hi bounds d(s) for
+// every s. d′ is again such a spline, of one degree less, whose coefficients are scaled
+// differences: p (c_{k+1} − c_k) for Bernstein degree p, 3 (c_{k+1} − c_k)/(t_{k+4} − t_{k+1})
+// for the clamped cubic B-spline; |c_{k+1} − c_k| ≤ max_step[k] bounds |d′| for every s.
+struct ProfileBounds {
+  enum class Kind { radius_min, radius_max, slope };
+  double lo = -std::numeric_limits<double>::infinity();
+  double hi = std::numeric_limits<double>::infinity();
+  std::vector<double> max_step;  // nc − 1 entries, or none
+  MatX G;                        // the same as rows: #constraints by nc
+  VecX h;
+  std::vector<Kind> kind;
+  // Violations below it are rounding (the projection removes them) and slacks below it count
+  // as active in the report: the KKT solves leave errors of ~1e-16 of the radii times the
+  // conditioning of the normal matrix along the profile.
+  double tolerance = 0.0;
+
+  bool empty() const { return G.rows() == 0; }
+  double violation(const VecX& c) const {
+    return empty() ? 0.0 : (G * c - h).maxCoeff();
+  }
+  // Clamp into [lo, hi], then walk along the coefficients pulling each to within max_step of
+  // its predecessor: stays inside [lo, hi] (each move is toward a value inside) and leaves a
+  // feasible c unchanged, bit for bit.
+  void project(VecX* c) const {
+    for (Eigen::Index k = 0; k < c->size(); ++k) (*c)(k) = std::min(std::max((*c)(k), lo), hi);
+    for (std::size_t k = 0; k < max_step.size(); ++k) {
+      const double prev = (*c)(static_cast<Eigen::Index>(k));
+      double& next = (*c)(static_cast<Eigen::Index>(k + 1));
+      next = std::min(std::max(next, prev - max_step[k]), prev + max_step[k]);
+    }
+  }
+};
+
+ProfileBounds profile_bounds(CutterKind kind, double L, const FitOptions& o) {
+  ProfileBounds pb;
+  const int nc = coefficient_count(kind);
+  if (o.radius_min > 0) pb.lo = o.radius_min;
+  if (o.radius_max > 0) pb.hi = o.radius_max;
+  if (o.max_slope_fraction > 0 && nc > 1) {
+    const double limit = o.max_slope_fraction * L;  // on |d′|
+    pb.max_step.resize(static_cast<std::size_t>(nc - 1));
+    if (kind == CutterKind::spline) {
+      const std::vector<double> t = clamped_uniform_knots(nc);
+      for (int k = 0; k + 1 < nc; ++k)
+        pb.max_step[k] = limit * (t[k + kSplineDegree + 1] - t[k + 1]) / kSplineDegree;
+    } else {
+      const int degree = nc - 1;  // Bernstein
+      for (int k = 0; k + 1 < nc; ++k) pb.max_step[k] = limit / degree;
+    }
+  }
+  std::vector<std::pair<VecX, double>> rows;
+  for (int k = 0; k < nc; ++k) {
+    if (o.radius_min > 0) {
+      rows.emplace_back(-VecX::Unit(nc, k), -pb.lo);
+      pb.kind.push_back(ProfileBounds::Kind::radius_min);
+    }
+    if (o.radius_max > 0) {
+      rows.emplace_back(VecX::Unit(nc, k), pb.hi);
+      pb.kind.push_back(ProfileBounds::Kind::radius_max);
+    }
+  }
+  for (std::size_t k = 0; k < pb.max_step.size(); ++k)
+    for (double sign : {1.0, -1.0}) {
+      VecX g = VecX::Zero(nc);
+      g(static_cast<Eigen::Index>(k) + 1) = sign, g(static_cast<Eigen::Index>(k)) = -sign;
+      rows.emplace_back(g, pb.max_step[k]);
+      pb.kind.push_back(ProfileBounds::Kind::slope);
+    }
+  pb.G.resize(static_cast<Eigen::Index>(rows.size()), nc);
+  pb.h.resize(static_cast<Eigen::Index>(rows.size()));
+  for (std::size_t r = 0; r < rows.size(); ++r) {
+    pb.G.row(static_cast<Eigen::Index>(r)) = rows[r].first.transpose();
+    pb.h(static_cast<Eigen::Index>(r)) = rows[r].second;
+  }
+  pb.tolerance = 1e-10 * std::max({L, o.radius_max, o.radius_min});
+  return pb;
+}
+
+// x's profile part projected onto the cutter constraints (a no-op when it satisfies them).
+void project_profile(const ProfileBounds& bounds, int nc, VecX* x) {
+  if (bounds.empty()) return;
+  VecX c = x->tail(nc);
+  bounds.project(&c);
+  x->tail(nc) = c;
+}
+
 // Upper-triangular pattern of JᵀJ: control points couple within the cubic support, the
 // profile couples with everything.
 void build_pattern(const Layout& lay, std::vector<int>* col_ptr, std::vector<int>* row_idx) {
@@ -231,6 +336,110 @@ void build_pattern(const Layout& lay, std::vector<int>* col_ptr, std::vector<int
 }
 
 }  // namespace
+
+ActiveSetStep active_set_step(const std::function<bool(const VecX& rhs, VecX* x)>& solve,
+                              const VecX& free_step, const MatX& A, const VecX& b,
+                              double tolerance, int max_iterations) {
+  ActiveSetStep out;
+  const Eigen::Index n = free_step.size();
+  const int m = static_cast<int>(A.rows());
+  assert(A.cols() == n && b.size() == m);
+  VecX delta = VecX::Zero(n);
+  std::vector<VecX> u(static_cast<std::size_t>(m));  // H⁻¹ aᵢ, once i has been a candidate
+  std::vector<char> in_set(static_cast<std::size_t>(m), 0);
+  // Rows found dependent on the working set; forgotten when a row leaves it.
+  std::vector<char> dependent(static_cast<std::size_t>(m), 0);
+  std::vector<int> W;  // working set, in the order the constraints entered
+  VecX lambda;
+  const VecX a_free = A * free_step;
+  for (int it = 0; it < max_iterations; ++it) {
+    out.iterations = it + 1;
+    // Minimiser of q on the equalities of W: δ* = δ_free − Σ λ_w H⁻¹a_w with
+    // (A_W H⁻¹ A_Wᵀ) λ = A_W δ_free − b_W; KKT gives H δ* + g + A_Wᵀ λ = 0.
+    const int w = static_cast<int>(W.size());
+    MatX M(w, w);
+    VecX rhs(w);
+    for (int r = 0; r < w; ++r) {
+      for (int c = 0; c < w; ++c) M(r, c) = A.row(W[r]).dot(u[W[c]]);
+      rhs(r) = a_free(W[r]) - b(W[r]);
+    }
+    // A_W H⁻¹ A_Wᵀ is positive definite for a positive definite H and independent rows; when
+    // rounding makes it otherwise, H is too ill-conditioned along the constrained directions
+    // for an exact step (e.g. a profile coefficient almost free of data): fail, so that the
+    // caller damps more.
+    const Eigen::LLT<MatX> llt(M);
+    if (llt.info() != Eigen::Success) return out;
+    lambda = llt.solve(rhs);
+    if (!lambda.allFinite()) return out;
+    VecX target = free_step;
+    for (int r = 0; r < w; ++r) target -= lambda(r) * u[W[r]];
+
+    // The first constraint outside W that the segment δ → δ* crosses (ties: the lowest row).
+    // One that δ* violates by rounding only does not block: after a multiplier at rounding
+    // level is dropped, it would come straight back and cycle.
+    const VecX p = target - delta;
+    int blocking = -1;
+    for (;;) {
+      double alpha = 1.0;
+      blocking = -1;
+      for (int i = 0; i < m; ++i) {
+        if (in_set[i] || dependent[i] || !(A.row(i).dot(target) > b(i) + tolerance)) continue;
+        const double ap = A.row(i).dot(p);
+        if (!(ap > 0.0)) continue;
+        const double slack = std::max(0.0, b(i) - A.row(i).dot(delta));
+        if (slack < alpha * ap) alpha = slack / ap, blocking = i;
+      }
+      if (blocking < 0) break;
+      if (u[blocking].size() == 0 && !solve(A.row(blocking).transpose(), &u[blocking])) return out;
+      // A row in the span of W's rows cannot block in exact arithmetic (aᵢᵀp = 0 for every
+      // step that keeps W), and would make A_W H⁻¹ A_Wᵀ singular: its H⁻¹-norm left after
+      // projecting out W's rows, aᵢᵀH⁻¹aᵢ − vᵀ M⁻¹ v with v = A_W H⁻¹ aᵢ, is at rounding level.
+      const double own = A.row(blocking).dot(u[blocking]);
+      if (!(own > 0.0)) return out;  // H is not numerically positive definite along aᵢ
+      double left = own;
+      if (w > 0) {
+        VecX v(w);
+        for (int r = 0; r < w; ++r) v(r) = A.row(W[r]).dot(u[blocking]);
+        left -= v.dot(llt.solve(v));
+      }
+      if (left > 1e-10 * own) {
+        delta += alpha * p;
+        break;
+      }
+      dependent[blocking] = 1;
+    }
+    if (blocking >= 0) {
+      W.push_back(blocking);
+      in_set[blocking] = 1;
+      continue;
+    }
+    delta = target;
+    // Optimal when no multiplier is negative beyond rounding; else drop the most negative.
+    const double scale = w > 0 ? lambda.cwiseAbs().maxCoeff() : 0.0;
+    int drop = -1;
+    for (int r = 0; r < w; ++r)
+      if (lambda(r) < -1e-12 * scale && (drop < 0 || lambda(r) < lambda(drop))) drop = r;
+    if (drop < 0) {
+      out.optimal = true;
+      break;
+    }
+    in_set[W[drop]] = 0;
+    W.erase(W.begin() + drop);
+    std::fill(dependent.begin(), dependent.end(), 0);
+  }
+  out.ok = true;
+  out.step = std::move(delta);
+  std::vector<int> order(W.size());
+  std::iota(order.begin(), order.end(), 0);
+  std::sort(order.begin(), order.end(), [&](int x, int y) { return W[x] < W[y]; });
+  for (int r : order) out.active.push_back(W[r]);
+  if (out.optimal) {
+    out.multipliers.resize(static_cast<Eigen::Index>(W.size()));
+    for (std::size_t k = 0; k < order.size(); ++k)
+      out.multipliers(static_cast<Eigen::Index>(k)) = lambda(order[k]);
+  }
+  return out;
+}
 
 FitResult fit_motion(const SurfaceIndex& index, const Motion& init_motion,
                      const FitOptions& options, const Cutter* init_cutter) {
@@ -321,6 +530,9 @@ FitResult fit_motion(const SurfaceIndex& index, const Motion& init_motion,
     }
     x.tail(nc) = Cutter::fit(options.kind, pb.L, ss, dd).coeffs;
   }
+  // Every iterate stays a real tool: start from a feasible profile.
+  const ProfileBounds bounds = profile_bounds(options.kind, pb.L, options);
+  project_profile(bounds, nc, &x);
 
   std::vector<int> col_ptr, row_idx;
   build_pattern(pb.layout, &col_ptr, &row_idx);
@@ -338,7 +550,12 @@ FitResult fit_motion(const SurfaceIndex& index, const Motion& init_motion,
   int iter = 0;
   bool converged = false;
   std::vector<double> values(row_idx.size());
-  const bool trace = std::getenv("FLANK_TRACE_FIT") != nullptr;
+  const auto solve = [&chol](const VecX& rhs, VecX* out) {
+    return chol.solve(rhs, out) == SparseCholesky::Status::ok;
+  };
+  // A = [0 | G]: the constraints act on c only.
+  MatX A_bounds = MatX::Zero(bounds.G.rows(), N);
+  A_bounds.rightCols(nc) = bounds.G;
   for (; iter < options.max_iterations && !converged; ++iter) {
     if (ev.interior < std::max(nc, n)) {
       result.status = FitStatus::left_surface;
@@ -360,19 +577,45 @@ FitResult fit_motion(const SurfaceIndex& index, const Motion& init_motion,
         }
       VecX delta;
       const auto fs = chol.factorize(values);
-      const bool solved = fs == SparseCholesky::Status::ok &&
-                          chol.solve(-ev.g, &delta) == SparseCholesky::Status::ok;
+      bool solved = fs == SparseCholesky::Status::ok && solve(-ev.g, &delta);
+      // The damped Gauss–Newton model under the cutter constraints, solved exactly: only when
+      // the free step leaves them, so an unconstrained fit takes the very same steps.
+      int active = 0;
+      bool cut_short = false;
+      const VecX c_now = x.tail(nc);
+      const char* failed = solved ? nullptr : "factorisation failed";
+      if (solved && bounds.violation(c_now + delta.tail(nc)) > bounds.tolerance) {
+        const VecX slack = (bounds.h - bounds.G * c_now).cwiseMax(0.0);
+        ActiveSetStep qp = active_set_step(solve, delta, A_bounds, slack, bounds.tolerance,
+                                           options.active_set_iterations);
+        solved = qp.ok;
+        if (!solved) failed = "constrained step failed";
+        delta = std::move(qp.step);
+        active = static_cast<int>(qp.active.size());
+        cut_short = !qp.optimal;
+      }
       result.timing.factor_s += seconds_since(t0);
       if (!solved) {
+        if (options.trace) {
+          char line[128];
+          std::snprintf(line, sizeof line, "iter %d lambda %.3g: %s", iter, lambda, failed);
+          options.trace(line);
+        }
         lambda *= 10.0;
         continue;
       }
-      const VecX x_new = x + delta;
+      VecX x_new = x + delta;
+      project_profile(bounds, nc, &x_new);  // violations below the tolerance, or rounding
       std::vector<int> trial_hints = hints;
       Evaluation trial = evaluate(pb, x_new, trial_hints, result.timing);
-      if (trace)
-        std::fprintf(stderr, "iter %d lambda %.3g cost %.6g -> %.6g (fair %.3g) interior %d |step| %.3g\n", iter, lambda,
-                     ev.cost, trial.cost, delta.dot(pb.H_fair * delta), trial.interior, delta.head(6 * K).cwiseAbs().maxCoeff());
+      if (options.trace) {
+        char line[256];
+        std::snprintf(line, sizeof line,
+                      "iter %d lambda %.3g cost %.6g -> %.6g (fair %.3g) interior %d |step| %.3g active %d%s",
+                      iter, lambda, ev.cost, trial.cost, delta.dot(pb.H_fair * delta), trial.interior,
+                      delta.head(6 * K).cwiseAbs().maxCoeff(), active, cut_short ? " (cut short)" : "");
+        options.trace(line);
+      }
       if (trial.cost <= ev.cost && trial.interior >= std::max(nc, n)) {
         const double decrease = ev.cost - trial.cost;
         x = x_new;
@@ -384,9 +627,12 @@ FitResult fit_motion(const SurfaceIndex& index, const Motion& init_motion,
         accepted = true;
         // Near the optimum the footpoints slide with the axis and successive GN steps line up
         // (linear convergence along the radius ↔ offset valley): extend the step while the
-        // cost keeps falling, each extension one batch of closest points.
+        // cost keeps falling, each extension one batch of closest points. A profile that the
+        // extension pushes past a cutter constraint is projected back: the motion may still
+        // gain while the radius stays on its bound.
         for (int e = 0; e < options.max_extrapolations && !converged && !pb.fair_active; ++e) {
-          const VecX x_far = x + delta * static_cast<double>(1 << e);
+          VecX x_far = x + delta * static_cast<double>(1 << e);
+          project_profile(bounds, nc, &x_far);
           std::vector<int> far_hints = hints;
           Evaluation far = evaluate(pb, x_far, far_hints, result.timing);
           if (!(far.cost < ev.cost) || far.interior < std::max(nc, n)) break;
@@ -417,6 +663,17 @@ FitResult fit_motion(const SurfaceIndex& index, const Motion& init_motion,
   result.iterations = iter;
   result.final_cost = ev.cost;
   result.interior_fraction = static_cast<double>(ev.interior) / (static_cast<double>(m) * n);
+  if (!bounds.empty()) {
+    const VecX slack = bounds.h - bounds.G * c;
+    for (Eigen::Index r = 0; r < slack.size(); ++r) {
+      if (slack(r) > bounds.tolerance) continue;
+      switch (bounds.kind[static_cast<std::size_t>(r)]) {
+        case ProfileBounds::Kind::radius_min: result.radius_at_min = true; break;
+        case ProfileBounds::Kind::radius_max: result.radius_at_max = true; break;
+        case ProfileBounds::Kind::slope: result.slope_at_limit = true; break;
+      }
+    }
+  }
   if (result.status != FitStatus::left_surface) {
     result.status = converged ? FitStatus::converged : FitStatus::max_iterations;
     if (!result.cutter.valid()) result.status = FitStatus::invalid_cutter;

@@ -5,7 +5,9 @@
 // (symbolic analysis once per call).
 #pragma once
 
+#include <functional>
 #include <string>
+#include <vector>
 
 #include "kernels/cutter.h"
 #include "kernels/surface_index.h"
@@ -42,6 +44,26 @@ struct FitOptions {
   double length = 0.0;  // rigid ruling length L; 0: the initial motion's mean length
   double scale = 0.0;   // normalising length; 0: bbox diagonal of Φ
 
+  // A real tool (DESIGN "Real surfaces are not exact envelopes"): the fit keeps the sphere
+  // radii within [radius_min, radius_max] (mm; 0: no bound on that side) and |d′(s)| ≤
+  // max_slope_fraction · L, so that the meridian (sL − d d′/L, d √(1 − (d′/L)²)) stays valid
+  // with a margin (0: no slope bound). They are linear inequalities on the profile
+  // coefficients c, imposed inside every Levenberg–Marquardt step: the Bernstein and B-spline
+  // bases are non-negative and sum to one, so bounding the c_k bounds d(s) for every s, and
+  // bounding their scaled differences (the coefficients of d′) bounds |d′| for every s.
+  // Without them a fit along a long twisted sweep can shrink the cutter to a few hundredths
+  // of a millimetre: the axis then lies on Φ and the "cutter" is a line.
+  double radius_min = 0.0;
+  double radius_max = 0.0;
+  double max_slope_fraction = 0.9;
+  // Guard on the active-set iterations per step; the primal method ends after a few, since
+  // each adds or drops one of at most 2 (2 nc − 1) constraints.
+  int active_set_iterations = 50;
+
+  // One line per Levenberg–Marquardt trial (damping, cost before and after, fairness of the
+  // step, interior samples, largest motion step, active cutter constraints); empty: silent.
+  std::function<void(const std::string&)> trace;
+
   // Empty when valid, else a one-line reason.
   std::string validate() const;
 };
@@ -51,7 +73,9 @@ enum class FitStatus {
   max_iterations,
   not_positive_definite,
   left_surface,    // too few samples have footpoints inside Φ
-  invalid_cutter,  // the optimum has |d′| ≥ L or d ≤ 0 somewhere
+  // The optimum has |d′| ≥ L or d ≤ 0 somewhere. Cannot happen with radius_min > 0 and
+  // max_slope_fraction > 0: the fit then never leaves the valid cutters.
+  invalid_cutter,
 };
 const char* to_string(FitStatus status);
 
@@ -72,9 +96,15 @@ struct FitResult {
   double initial_cost = 0.0;
   double final_cost = 0.0;
   double interior_fraction = 0.0;  // samples whose footpoint is inside Φ, at the end
+  // Cutter constraints (FitOptions::radius_min, radius_max, max_slope_fraction) that hold a
+  // profile coefficient on their bound (to rounding) at the end: the fit pressed against them.
+  bool radius_at_min = false;
+  bool radius_at_max = false;
+  bool slope_at_limit = false;
   FitTiming timing;
 
   bool ok() const { return status == FitStatus::converged || status == FitStatus::max_iterations; }
+  bool radius_at_bound() const { return radius_at_min || radius_at_max; }
   std::string brief_report() const;
 };
 
@@ -82,5 +112,29 @@ struct FitResult {
 // distances. The cutter kind is options.kind.
 FitResult fit_motion(const SurfaceIndex& index, const Motion& init, const FitOptions& options,
                      const Cutter* init_cutter = nullptr);
+
+// The inequality-constrained step of fit_motion, exposed for its test: minimises
+//   q(δ) = ½ δᵀ H δ + gᵀ δ   subject to   A δ ≤ b   (b ≥ 0, so δ = 0 is feasible)
+// for a positive definite H known only through `solve` (x = H⁻¹ rhs; false on failure) and
+// the unconstrained minimiser `free_step` = −H⁻¹ g. Primal active-set method (Nocedal &
+// Wright, Algorithm 16.3) from δ = 0: step toward the minimiser on the working set's
+// equalities, stop at the first constraint in the way and add it, drop the constraint of the
+// most negative multiplier once the minimiser is feasible. Every iterate is feasible and
+// none raises q, so the step is usable even when `max_iterations` cuts it short. H⁻¹aᵢ costs one
+// solve per constraint that ever blocks. A is #constraints by #δ; the working set is kept
+// linearly independent (a row in the span of its rows never enters). Violations up to
+// `tolerance` (in the units of b; above the rounding of δ) count as feasible. Not ok when a
+// solve fails or H turns out not numerically positive definite along the constraints.
+struct ActiveSetStep {
+  bool ok = false;          // false: a solve failed or H is not numerically positive definite
+  bool optimal = false;     // KKT conditions met (else max_iterations cut it short)
+  VecX step;                // δ
+  std::vector<int> active;  // rows of A in the final working set, ascending
+  VecX multipliers;         // when optimal: their Lagrange multipliers, all ≥ 0
+  int iterations = 0;
+};
+ActiveSetStep active_set_step(const std::function<bool(const VecX& rhs, VecX* x)>& solve,
+                              const VecX& free_step, const MatX& A, const VecX& b,
+                              double tolerance, int max_iterations);
 
 }  // namespace flank
