@@ -2,6 +2,7 @@
 // drawn by hand.
 #include <CLI/CLI.hpp>
 #include <cstdio>
+#include <cstdlib>
 #include <optional>
 #include <sstream>
 
@@ -17,7 +18,7 @@ namespace flank::cli {
 namespace {
 
 struct DecomposeArgs : PatchArgs {
-  std::string tools = "cone", radius, length;
+  std::string tools = "cylinder,cone,barrel,spline", radius, length;
   int max_patches = 20;
   double coverage = 0.95;
 };
@@ -65,6 +66,7 @@ int run_decompose(const DecomposeArgs& a) {
   o.tolerance = resolve_tolerance(a.tolerance, a.tolerance_rel, diagonal);
   progress.stage("indexed; tolerance " + std::to_string(o.tolerance) + " mm");
 
+  if (std::getenv("FLANK_TRACE_DECOMPOSE")) o.trace = [](const std::string& s) { std::fprintf(stderr, "%s\n", s.c_str()); };
   const DecomposeResult r = decompose(index, o, [&](const std::string& s) { progress.stage(s); });
   const double total = progress.elapsed();
 
@@ -75,26 +77,29 @@ int run_decompose(const DecomposeArgs& a) {
   run.bbox_diagonal = diagonal;
   std::string kinds_text;
   for (CutterKind k : o.kinds) kinds_text += (kinds_text.empty() ? "" : ",") + std::string(to_string(k));
+  const ToolRanges ranges = tool_ranges(o, diagonal);
   run.settings = {{"command", std::string("decompose")},
                   {"tolerance", o.tolerance},
                   {"tool", kinds_text},
-                  {"radius", std::vector<double>{o.radius_min > 0 ? o.radius_min : 0.01 * diagonal,
-                                                 o.radius_max > 0 ? o.radius_max : 0.10 * diagonal}},
-                  {"length", std::vector<double>{o.length_min > 0 ? o.length_min : 0.10 * diagonal,
-                                                 o.length_max > 0 ? o.length_max : 0.45 * diagonal}},
+                  {"radius", std::vector<double>{ranges.radius_min, ranges.radius_max}},
+                  {"length", std::vector<double>{ranges.length_min, ranges.length_max}},
                   {"coverage_target", o.coverage_target},
                   {"max_patches", static_cast<long long>(o.max_patches)},
                   {"max_rounds", static_cast<long long>(o.max_rounds)},
                   {"candidates_per_seed", std::vector<double>{double(o.directions), double(o.tilts),
-                                                              double(o.radii), double(o.lengths)}},
+                                                              double(o.radii), double(o.directions_kept),
+                                                              double(o.lengths)}},
                   {"control_points", static_cast<long long>(o.control_points)},
                   {"flip", a.flip}};
   if (o.holder) run.settings.push_back({"holder", std::vector<double>{o.holder_length, o.holder_radius}});
   run.tolerance = o.tolerance;
   run.coverage_fraction = r.coverage;
   run.uncovered_area = r.total_area - r.covered_area;
-  run.timing_s = {{"index", index_s},        {"seeds", r.times.seeds}, {"candidates", r.times.candidates},
-                  {"fit", r.times.fit},      {"cover", r.times.cover}, {"total", total}};
+  run.coverage_curve = r.coverage_curve;
+  for (const UncoveredRegion& u : r.uncovered) run.uncovered.push_back({u.area, u.centroid, u.vertices});
+  run.timing_s = {{"index", index_s},   {"seeds", r.times.seeds},   {"candidates", r.times.candidates},
+                  {"fit", r.times.fit}, {"cover", r.times.cover},   {"finish", r.times.finish},
+                  {"total", total}};
 
   write_outputs(a, run, r.patches, lm.mesh, r.vertex_patch, o.tolerance);
 
@@ -118,10 +123,13 @@ int run_decompose(const DecomposeArgs& a) {
     std::printf("%s %.3g mm^2 at (%.1f, %.1f, %.1f)", k ? "," : ":", r.uncovered[k].area,
                 r.uncovered[k].centroid.x(), r.uncovered[k].centroid.y(), r.uncovered[k].centroid.z());
   std::printf("\n");
-  std::printf("time: index %.2fs, seeds %.2fs, candidates %.2fs (%lld lines), fit %.2fs (%d grown), "
-              "cover %.2fs, total %.2fs\n",
-              index_s, r.times.seeds, r.times.candidates, r.lines_scored, r.times.fit, r.grown,
-              r.times.cover, total);
+  std::printf("coverage after 1..%zu patches:", r.coverage_curve.size());
+  for (double c : r.coverage_curve) std::printf(" %.1f%%", 100.0 * c);
+  std::printf("\n");
+  std::printf("time: index %.2fs, seeds %.2fs, candidates %.2fs (%lld lines scored, %d laid out), fit %.2fs (%d grown), "
+              "cover %.2fs, refit %.2fs, total %.2fs\n",
+              index_s, r.times.seeds, r.times.candidates, r.lines_scored, r.candidates, r.times.fit, r.grown,
+              r.times.cover, r.times.finish, total);
   std::printf("results in %s: patches.json envelopes.ply design.ply toolpath.apt\n", a.out_dir.c_str());
   return 0;
 }

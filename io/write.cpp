@@ -296,9 +296,16 @@ void write_patches_json(const fs::path& path, const RunInfo& run, const std::vec
   Json settings = Json::object();
   for (const Setting& s : run.settings) settings[s.key] = setting_value(s.value);
   root["settings"] = std::move(settings);
+  Json curve = Json::array();
+  for (double c : run.coverage_curve) curve.push_back(number(c));
+  Json regions = Json::array();
+  for (const RunInfo::Region& r : run.uncovered)
+    regions.push_back(Json{{"area", number(r.area)}, {"centroid", point(r.centroid.transpose())}, {"vertices", r.vertices}});
   root["coverage"] = Json{{"fraction", number(run.coverage_fraction)},
                           {"tolerance", number(run.tolerance)},
-                          {"uncovered_area", number(run.uncovered_area)}};
+                          {"uncovered_area", number(run.uncovered_area)},
+                          {"curve", std::move(curve)},
+                          {"uncovered_regions", std::move(regions)}};
   Json timing = Json::object();
   for (const auto& [name, seconds] : run.timing_s) timing[name] = number(seconds);
   root["timing_s"] = std::move(timing);

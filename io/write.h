@@ -35,6 +35,15 @@ struct RunInfo {
   double coverage_fraction = 0.0;
   double tolerance = 0.0;
   double uncovered_area = 0.0;
+  // The covered fraction after 1, 2, …, k patches: what each extra sweep buys.
+  std::vector<double> coverage_curve;
+  // Edge-connected regions left uncovered (for ball-end finishing), largest first.
+  struct Region {
+    double area = 0.0;
+    Vec3 centroid = Vec3::Zero();
+    int vertices = 0;
+  };
+  std::vector<Region> uncovered;
   std::vector<std::pair<std::string, double>> timing_s;  // index, candidates, fit, cover, total
 };
 

@@ -102,7 +102,10 @@ Movability movability(const SurfaceIndex& index, const Vec3& a, const Vec3& b,
       w[i] = 0.0;
       ++boundary;
     }
-    if (i > 0 && (cp[i].point - cp[i - 1].point).norm() > options.jump_factor * step + 1e-12)
+    // Two branches of the characteristic (paper Remark 1) show as interior footpoints that
+    // jump; footpoints on Φ's boundary jump across a hole or along an edge, which is no branch.
+    const bool interior_pair = i > 0 && !cp[i].boundary && !cp[i - 1].boundary && cp[i].face >= 0 && cp[i - 1].face >= 0;
+    if (interior_pair && (cp[i].point - cp[i - 1].point).norm() > options.jump_factor * step + 1e-12)
       jump = true;
     if (static_cast<int>(hints.size()) == n) hints[i] = cp[i].face;
   }

@@ -94,6 +94,12 @@ inline Vec3 closest_on_triangle(const Vec3& p, const Vec3& a, const Vec3& b, con
 
 struct Triangle {
   Vec3 a, b, c;
+  // A ball around the triangle: |p − centre| − radius is a lower bound of the distance, a
+  // cheap test that spares the exact one for most triangles a query visits. Query points sit
+  // a cutter radius above Φ, so the leaves around the footpoint that Embree must visit hold
+  // tens of triangles, nearly all farther than the best found.
+  Vec3 centre;
+  double radius;
 };
 
 // Embree reports errors through this sink; it never throws (it runs inside Embree). The
@@ -301,6 +307,9 @@ struct QueryState {
   bool consider(int f) {
     int region = 0;
     const Triangle& t = triangles[f];
+    // d² ≥ lb² > best_d2: the triangle can neither win nor tie.
+    const double lb = (p - t.centre).norm() - t.radius;
+    if (lb > 0.0 && lb * lb > best_d2) return false;
     const Vec3 q = closest_on_triangle(p, t.a, t.b, t.c, region);
     const double d2 = (p - q).squaredNorm();
     if (d2 < best_d2 || (d2 == best_d2 && f < best_face)) {
@@ -403,9 +412,16 @@ SurfaceIndex::SurfaceIndex(const Mesh& mesh) : impl_(std::make_unique<Impl>()) {
 
   const int nf = mesh.face_count();
   m.triangles.resize(static_cast<std::size_t>(nf));
-  for (int f = 0; f < nf; ++f)
-    m.triangles[static_cast<std::size_t>(f)] = {mesh.V.row(mesh.F(f, 0)), mesh.V.row(mesh.F(f, 1)),
-                                                mesh.V.row(mesh.F(f, 2))};
+  for (int f = 0; f < nf; ++f) {
+    Triangle& t = m.triangles[static_cast<std::size_t>(f)];
+    t.a = mesh.V.row(mesh.F(f, 0));
+    t.b = mesh.V.row(mesh.F(f, 1));
+    t.c = mesh.V.row(mesh.F(f, 2));
+    t.centre = (t.a + t.b + t.c) / 3.0;
+    // Rounded up a little: the ball must contain the triangle whatever the rounding.
+    t.radius = std::max({(t.a - t.centre).norm(), (t.b - t.centre).norm(), (t.c - t.centre).norm()}) *
+               (1.0 + 1e-12) + 1e-300;
+  }
   m.build_adjacency();
   m.build_scene();
 }

@@ -1,7 +1,9 @@
 // Automatic decomposition (DESIGN "Automatic decomposition", the step the paper leaves to a
-// person): seeds over Φ, thousands of candidate lines per seed scored by movability, the
-// best grown and fitted concurrently into candidate patches, then a greedy cover; uncovered
-// regions are seeded again for a bounded number of rounds.
+// person): orchestration only. Each round seeds the part of Φ still uncovered
+// (solver/seed_tiles), lays candidate lines across it and ranks them by the area their probe
+// sweep may cover (solver/candidate_lines), grows the best into fitted, trimmed candidate
+// patches concurrently (solver/grow_patch), and extends a greedy cover (solver/greedy_cover).
+// The chosen patches are then refitted at full resolution with their simplest cutter kind.
 #pragma once
 
 #include <functional>
@@ -10,70 +12,106 @@
 
 #include "kernels/cutter.h"
 #include "kernels/surface_index.h"
+#include "solver/greedy_cover.h"
 #include "solver/patch.h"
+#include "solver/surface_noise.h"
 
 namespace flank {
 
 struct DecomposeOptions {
-  double tolerance = 0.0;                         // absolute, > 0
-  std::vector<CutterKind> kinds{CutterKind::cone};
-  double radius_min = 0.0, radius_max = 0.0;      // allowed cutter (sphere) radii; 0: 1%..10% of diagonal
-  double length_min = 0.0, length_max = 0.0;      // allowed cutter lengths; 0: 10%..45% of diagonal
+  double tolerance = 0.0;  // absolute, > 0
+  // Cutter kinds allowed. Every one by default: the product designs the cutter. Candidates are
+  // fitted with the most general kind allowed, and each chosen patch gets the simplest allowed
+  // kind that cuts the same surface.
+  std::vector<CutterKind> kinds{CutterKind::cylinder, CutterKind::cone, CutterKind::barrel,
+                                CutterKind::spline};
+  // Allowed sphere radii and cutter lengths (absolute; 0: the default fraction of the bbox
+  // diagonal). Radii of 1%..10% and lengths of 3%..45% of the diagonal are tools a machinist
+  // would accept on a part of that size.
+  double radius_min = 0.0, radius_max = 0.0;
+  double length_min = 0.0, length_max = 0.0;
+  static constexpr double kDefaultRadiusMin = 0.01, kDefaultRadiusMax = 0.10;
+  static constexpr double kDefaultLengthMin = 0.03, kDefaultLengthMax = 0.45;
   bool holder = false;
   double holder_length = 0.0, holder_radius = 0.0;
   double coverage_target = 0.95;
   int max_patches = 20;
-  int max_rounds = 3;          // seeding rounds (the first, then re-seeding of uncovered regions)
-  double min_gain = 0.005;     // a patch must add at least this fraction of Φ's area
+  double min_gain = 0.005;  // a patch must add at least this fraction of Φ's area
+  int max_swaps = 8;        // improvements of the greedy cover per round (greedy_cover.h)
+  int max_rounds = 6;       // seeding rounds: all of Φ, then what is still uncovered
+  // A round after the first that adds less than this fraction of Φ's area ends the search:
+  // what is left is scattered slivers, cheaper to finish with a ball-end mill.
+  double min_round_gain = 0.01;
+  // Seed spacing of the first round as a fraction of the diagonal; later rounds seed the
+  // uncovered regions at half of it.
+  double seed_spacing = 0.12;
+  int max_seeds = 24;       // per round
 
-  // Candidate lines per seed: directions × tilts × radii × lengths.
-  int directions = 24;         // over 180° in the tangent plane
-  int tilts = 5;               // toward the normal, symmetric, up to `max_tilt_deg`
-  double max_tilt_deg = 8.0;
-  int radii = 6;
-  int lengths = 3;
-  int coarse_samples = 16;     // n for the first scoring (5 unknowns: fewer is noise)
-  int fine_samples = 30;       // n for the rescoring of the best
-  int fine_candidates = 16;    // per seed and kind, rescored at fine_samples
-  int lines_per_seed = 3;      // kept per seed (distinct directions or radii)
-  int max_grown_per_round = 12;
-  double good_movability = 1e-5;  // F_l at or below this (and a profile within tolerance): "sweeps"
+  // Candidate lines per seed (solver/candidate_lines).
+  int directions = 24, tilts = 3, radii = 6;
+  int directions_kept = 2, lengths = 3;
+  double probe_step = 0.015;  // of the diagonal: the probe sweeps' step
 
-  // Fit of each grown candidate.
-  int control_points = 20;
-  int fit_iterations = 12;
+  // Growth: candidates grown per round, concurrently in batches of a fixed size (so that the
+  // result does not depend on the thread count). The fit's samples and control points.
+  int grow_per_round = 8;
+  int batch = 8;
+  int control_points = 16, samples_t = 48, samples_s = 16, iterations = 15;
+  // Step extensions per accepted Gauss–Newton step (FitOptions::max_extrapolations): each
+  // costs a pass of closest points, and a candidate needs the patch's extent, not the last
+  // digit of its cutter radius.
+  int extrapolations = 2;
+  // The chosen patches' final evaluation: at least final_rows × final_cols samples, and
+  // neighbouring samples at most final_spacing × diagonal apart (candidates are evaluated at
+  // twice that spacing).
+  int final_rows = 200, final_cols = 60;
+  double final_spacing = 0.0025;
+
+  // Scan noise (solver/surface_noise.h): when Φ's vertices scatter off a smooth surface by
+  // more than this fraction of the tolerance, the solver fits on a smoothed copy of Φ (this
+  // many local quadric projections) and reports against Φ as given. Measured on the test blades
+  // the scatter is ~1e-4 of the tolerance; a scan at 2e-4 of the diagonal is 0.7 of a 3e-4 one.
+  double noise_fraction = 0.1;
+  int smoothing_passes = 8;
+
+  // Diagnostics: one line per candidate line kept, per grown piece and per round.
+  std::function<void(const std::string&)> trace;
 
   std::string validate() const;
 };
 
 struct StageTimes {
-  double seeds = 0, candidates = 0, fit = 0, cover = 0;
-};
-
-struct UncoveredRegion {
-  double area = 0.0;
-  Vec3 centroid = Vec3::Zero();
-  int vertices = 0;
+  double seeds = 0, candidates = 0, fit = 0, cover = 0, finish = 0;
 };
 
 struct DecomposeResult {
-  std::vector<Patch> patches;          // in the order chosen; ids 0..k-1
+  NoiseEstimate noise;                 // of Φ as given
+  bool smoothed = false;               // the solver fitted on a smoothed copy of Φ
+  std::vector<Patch> patches;          // in cover order; ids 0..k-1
   std::vector<int> vertex_patch;       // per Φ vertex: the patch that covers it, −1 if none
   double total_area = 0.0;
   double covered_area = 0.0;
   double coverage = 0.0;               // covered fraction of Φ's area
+  std::vector<double> coverage_curve;  // covered fraction after 1, 2, …, k patches
   std::vector<UncoveredRegion> uncovered;  // edge-connected uncovered regions, largest first
   StageTimes times;
   int rounds = 0;
   int seeds = 0;
   long long lines_scored = 0;
-  int grown = 0;                       // candidates propagated and fitted
-  int candidates_valid = 0;            // of those, patches without gouge or holder collision
+  int candidates = 0;                  // candidate lines laid out and swept
+  int grown = 0;                       // candidates fitted
+  int candidates_valid = 0;            // candidate patches (pieces) valid as tools
 };
 
 using ProgressFn = std::function<void(const std::string&)>;
 
 DecomposeResult decompose(const SurfaceIndex& index, const DecomposeOptions& options,
                           const ProgressFn& progress = {});
+
+// The radius and length ranges in effect (absolute), defaults resolved against the diagonal.
+struct ToolRanges {
+  double radius_min, radius_max, length_min, length_max;
+};
+ToolRanges tool_ranges(const DecomposeOptions& options, double diagonal);
 
 }  // namespace flank

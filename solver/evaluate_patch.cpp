@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <limits>
 
 #include "kernels/envelope.h"
 #include "kernels/parallel.h"
@@ -11,6 +12,8 @@ namespace flank {
 std::string EvaluateOptions::validate() const {
   if (!(tolerance > 0.0) || !std::isfinite(tolerance)) return "tolerance must be positive";
   if (rows < 2 || cols < 2) return "evaluation needs at least 2 by 2 samples";
+  if (!(spacing >= 0) || !std::isfinite(spacing) || max_samples < 4) return "evaluation spacing out of range";
+  if (!(omega_band >= 1.0) || !std::isfinite(omega_band)) return "the band of Ω that covers must be at least the tolerance";
   if (holder && !(holder_length > 0.0 && holder_radius > 0.0))
     return "holder length and radius must be positive";
   return {};
@@ -20,64 +23,98 @@ ErrorGrid sample_errors(const SurfaceIndex& index, const Motion& motion, const C
                         int rows, int cols) {
   ErrorGrid grid;
   grid.rows = rows, grid.cols = cols;
-  Points q(static_cast<Eigen::Index>(rows) * cols, 3);
-  std::vector<double> d(static_cast<std::size_t>(cols));
-  for (int j = 0; j < cols; ++j) d[j] = cutter.radius(static_cast<double>(j) / (cols - 1));
+  const std::size_t n = static_cast<std::size_t>(rows) * cols;
+  Points q(static_cast<Eigen::Index>(n), 3);
+  std::vector<double> d(static_cast<std::size_t>(cols)), dd(static_cast<std::size_t>(cols));
+  for (int j = 0; j < cols; ++j) {
+    const double s = static_cast<double>(j) / (cols - 1);
+    d[j] = cutter.radius(s);
+    dd[j] = cutter.slope(s);
+  }
+  std::vector<Line> rulings(static_cast<std::size_t>(rows));
+  std::vector<Vec3> a_t(static_cast<std::size_t>(rows)), b_t(static_cast<std::size_t>(rows));
   for (int i = 0; i < rows; ++i) {
-    const Line l = motion.ruling(static_cast<double>(i) / (rows - 1));
-    for (int j = 0; j < cols; ++j) q.row(i * cols + j) = l.point(static_cast<double>(j) / (cols - 1)).transpose();
+    const double t = static_cast<double>(i) / (rows - 1);
+    rulings[i] = motion.ruling(t);
+    a_t[i] = motion.a_at(t, 1);
+    b_t[i] = motion.b_at(t, 1);
+    for (int j = 0; j < cols; ++j)
+      q.row(static_cast<Eigen::Index>(grid.index(i, j))) = rulings[i].point(static_cast<double>(j) / (cols - 1)).transpose();
   }
   const std::vector<ClosestPoint> cp = index.closest_points(q);
-  grid.error.resize(q.rows());
-  grid.interior.resize(cp.size());
-  grid.faces.resize(cp.size());
-  grid.directions.resize(static_cast<Eigen::Index>(cp.size()), 3);
-  for (std::size_t k = 0; k < cp.size(); ++k) {
+  grid.sphere_error.resize(static_cast<Eigen::Index>(n));
+  grid.interior.resize(n);
+  grid.faces.resize(n);
+  grid.directions.resize(static_cast<Eigen::Index>(n), 3);
+  for (std::size_t k = 0; k < n; ++k) {
     grid.directions.row(static_cast<Eigen::Index>(k)) = cp[k].direction.transpose();
-    const double dk = d[k % static_cast<std::size_t>(cols)];
     grid.interior[k] = !cp[k].boundary && cp[k].face >= 0;
     // Beyond Φ's edge the sign of the face plane means nothing: there a sphere gouges only
     // if it reaches Φ at all.
-    grid.error(static_cast<Eigen::Index>(k)) =
-        (grid.interior[k] ? cp[k].signed_distance : cp[k].distance) - dk;
+    grid.sphere_error(static_cast<Eigen::Index>(k)) =
+        (grid.interior[k] ? cp[k].signed_distance : cp[k].distance) - d[k % static_cast<std::size_t>(cols)];
     grid.faces[k] = cp[k].face;
+  }
+
+  // Ω's points: on Φ's side, the envelope normal points from the axis toward the footpoint.
+  grid.omega.resize(static_cast<Eigen::Index>(n), 3);
+  grid.omega_valid.assign(n, 0);
+  parallel_for(0, static_cast<std::size_t>(rows), [&](std::size_t b, std::size_t e) {
+    for (std::size_t ii = b; ii < e; ++ii) {
+      const int i = static_cast<int>(ii);
+      const Vec3 rs = rulings[ii].b - rulings[ii].a;
+      for (int j = 0; j < cols; ++j) {
+        const double s = static_cast<double>(j) / (cols - 1);
+        const std::size_t k = grid.index(i, j);
+        const Vec3 centre = q.row(static_cast<Eigen::Index>(k)).transpose();
+        const Vec3 rt = (1 - s) * a_t[ii] + s * b_t[ii];
+        const Vec3 g = grid.directions.row(static_cast<Eigen::Index>(k)).transpose();
+        const EnvelopePoint ep = envelope_point(centre, rt, rs, d[j], dd[j], envelope_side(rt, rs, -g));
+        grid.omega_valid[k] = ep.valid;
+        grid.omega.row(static_cast<Eigen::Index>(k)) = (ep.valid ? ep.point : centre).transpose();
+      }
+    }
+  });
+  // Ω's points lie near Φ, next to the centres' footpoints: warm-started, these queries are cheap.
+  const std::vector<ClosestPoint> op = index.closest_points(grid.omega, grid.faces);
+  grid.omega_interior.assign(n, 0);
+  grid.error = VecX::Zero(static_cast<Eigen::Index>(n));
+  for (std::size_t k = 0; k < n; ++k) {
+    if (!grid.omega_valid[k] || op[k].face < 0 || op[k].boundary) continue;
+    grid.omega_interior[k] = 1;
+    grid.error(static_cast<Eigen::Index>(k)) = op[k].signed_distance;
   }
   return grid;
 }
 
+std::vector<SampleClass> classify_samples(const ErrorGrid& grid, double tolerance) {
+  std::vector<SampleClass> out(static_cast<std::size_t>(grid.rows) * grid.cols, SampleClass::overhang);
+  for (std::size_t k = 0; k < out.size(); ++k) {
+    const auto e = static_cast<Eigen::Index>(k);
+    if (grid.sphere_error(e) < -tolerance)
+      out[k] = SampleClass::outside;  // the whole cutter: a sphere reaching into Φ gouges
+    else if (grid.omega_interior[k])
+      out[k] = std::abs(grid.error(e)) <= tolerance ? SampleClass::within : SampleClass::outside;
+    else if (!grid.omega_valid[k] && grid.interior[k])
+      out[k] = SampleClass::outside;  // over Φ, but this part of the cutter cuts no surface
+  }
+  return out;
+}
+
 namespace {
 
-Mesh envelope_mesh(const Motion& motion, const Cutter& cutter,
-                   const ErrorGrid& grid, EnvelopeMesh* out) {
+// Ω as a mesh over the grid: two triangles per cell whose corners all have an envelope point.
+// `keep` (optional) further restricts the corners.
+Mesh envelope_mesh(const ErrorGrid& grid, const std::vector<char>* keep) {
   const int rows = grid.rows, cols = grid.cols;
-  Points V(static_cast<Eigen::Index>(rows) * cols, 3);
-  std::vector<char> valid(static_cast<std::size_t>(rows) * cols, 0);
-  VecX err(V.rows());
-  parallel_for(0, static_cast<std::size_t>(rows), [&](std::size_t b, std::size_t e) {
-    for (std::size_t ii = b; ii < e; ++ii) {
-      const int i = static_cast<int>(ii);
-      const double t = static_cast<double>(i) / (rows - 1);
-      const Vec3 a = motion.a_at(t), bb = motion.b_at(t);
-      const Vec3 at = motion.a_at(t, 1), bt = motion.b_at(t, 1);
-      for (int j = 0; j < cols; ++j) {
-        const double s = static_cast<double>(j) / (cols - 1);
-        const Vec3 centre = (1 - s) * a + s * bb;
-        const Vec3 rt = (1 - s) * at + s * bt;
-        // Φ's side: the envelope normal points from the axis toward the footpoint.
-        const Vec3 g = grid.directions.row(i * cols + j).transpose();
-        const int side = envelope_side(rt, bb - a, -g);
-        const EnvelopePoint ep = envelope_point(centre, rt, bb - a, cutter.radius(s), cutter.slope(s), side);
-        const std::size_t k = static_cast<std::size_t>(i * cols + j);
-        valid[k] = ep.valid;
-        V.row(static_cast<Eigen::Index>(k)) = (ep.valid ? ep.point : centre).transpose();
-        err(static_cast<Eigen::Index>(k)) = grid.error(static_cast<Eigen::Index>(k));
-      }
-    }
-  });
   std::vector<Eigen::Vector3i> faces;
+  auto ok = [&](int k) {
+    return grid.omega_valid[static_cast<std::size_t>(k)] && (!keep || (*keep)[static_cast<std::size_t>(k)]);
+  };
   auto add = [&](int p, int q, int r) {
-    if (!valid[p] || !valid[q] || !valid[r]) return;
-    const Vec3 n = (Vec3(V.row(q)) - Vec3(V.row(p))).cross(Vec3(V.row(r)) - Vec3(V.row(p)));
+    if (!ok(p) || !ok(q) || !ok(r)) return;
+    const Vec3 a = grid.omega.row(p).transpose();
+    const Vec3 n = (Vec3(grid.omega.row(q).transpose()) - a).cross(Vec3(grid.omega.row(r).transpose()) - a);
     if (n.norm() > 1e-20) faces.emplace_back(p, q, r);
   };
   for (int i = 0; i + 1 < rows; ++i)
@@ -87,44 +124,85 @@ Mesh envelope_mesh(const Motion& motion, const Cutter& cutter,
       add(v00, v11, v01);
     }
   Mesh m;
-  m.V = V;
+  m.V = grid.omega;
   m.F.resize(static_cast<Eigen::Index>(faces.size()), 3);
   for (std::size_t f = 0; f < faces.size(); ++f) m.F.row(static_cast<Eigen::Index>(f)) = faces[f].transpose();
-  out->V = V;
-  out->F = m.F;
-  out->error = err;
-  out->rows = rows;
-  out->cols = cols;
   return m;
 }
 
 }  // namespace
 
-Patch evaluate_patch(const SurfaceIndex& index, const Motion& motion, const Cutter& cutter,
-                     const EvaluateOptions& options) {
-  Patch patch;
-  patch.motion = motion;
-  patch.cutter = cutter;
-  const ErrorGrid grid = sample_errors(index, motion, cutter, options.rows, options.cols);
+std::pair<int, int> evaluation_grid(const Motion& motion, const Cutter& cutter, const EvaluateOptions& o) {
+  int rows = o.rows, cols = o.cols;
+  if (o.spacing > 0) {
+    // The longest path of an axis point along the motion (its ends or its middle).
+    double path = 0.0;
+    for (double s : {0.0, 0.5, 1.0}) {
+      double p = 0.0;
+      Vec3 prev = motion.point(0.0, s);
+      for (int i = 1; i <= 64; ++i) {
+        const Vec3 q = motion.point(i / 64.0, s);
+        p += (q - prev).norm();
+        prev = q;
+      }
+      path = std::max(path, p);
+    }
+    rows = std::max(rows, static_cast<int>(std::ceil(path / o.spacing)) + 1);
+    cols = std::max(cols, static_cast<int>(std::ceil(cutter.length / o.spacing)) + 1);
+    // Within the budget, the two counts shrink in proportion.
+    const double excess = static_cast<double>(rows) * cols / std::max(1, o.max_samples);
+    if (excess > 1.0) {
+      const double f = 1.0 / std::sqrt(excess);
+      rows = std::max(o.rows, static_cast<int>(rows * f));
+      cols = std::max(o.cols, static_cast<int>(cols * f));
+    }
+  }
+  return {rows, cols};
+}
 
-  double max_abs = 0.0, sum_sq = 0.0, max_gouge = 0.0;
+namespace {
+struct GridStats {
+  double max_abs = 0.0, rms = 0.0, max_gouge = 0.0;
+};
+GridStats stats(const ErrorGrid& grid) {
+  GridStats st;
+  double sum_sq = 0.0;
   int count = 0;
   for (Eigen::Index k = 0; k < grid.error.size(); ++k) {
+    st.max_gouge = std::max(st.max_gouge, -grid.sphere_error(k));  // the whole cutter, every s and t
+    if (!grid.omega_interior[static_cast<std::size_t>(k)]) continue;
     const double e = grid.error(k);
-    max_gouge = std::max(max_gouge, -e);  // the whole cutter, every s and t
-    if (!grid.interior[static_cast<std::size_t>(k)]) continue;
-    max_abs = std::max(max_abs, std::abs(e));
+    st.max_gouge = std::max(st.max_gouge, -e);
+    st.max_abs = std::max(st.max_abs, std::abs(e));
     sum_sq += e * e;
     ++count;
   }
-  patch.error.max = max_abs;
-  patch.error.rms = count ? std::sqrt(sum_sq / count) : 0.0;
-  patch.error.max_gouge = max_gouge;
-  patch.error.max_relative = max_abs / index.diagonal();
+  st.rms = count ? std::sqrt(sum_sq / count) : 0.0;
+  return st;
+}
+}  // namespace
+
+Patch evaluate_patch(const SurfaceIndex& index, const Motion& motion, const Cutter& cutter,
+                     const EvaluateOptions& options, const SurfaceIndex* given) {
+  Patch patch;
+  patch.motion = motion;
+  patch.cutter = cutter;
+  const auto [rows, cols] = evaluation_grid(motion, cutter, options);
+  const ErrorGrid grid = sample_errors(index, motion, cutter, rows, cols);
+  const GridStats judged = stats(grid);
+  ErrorGrid given_grid;
+  if (given) given_grid = sample_errors(*given, motion, cutter, rows, cols);
+  const ErrorGrid& reported = given ? given_grid : grid;
+  const GridStats st = given ? stats(given_grid) : judged;
+  patch.error.max = st.max_abs;
+  patch.error.rms = st.rms;
+  patch.error.max_gouge = st.max_gouge;
+  patch.error.judged_gouge = judged.max_gouge;
+  patch.error.max_relative = st.max_abs / (given ? given : &index)->diagonal();
 
   if (options.holder) {
     // The holder: a cylinder of the given radius on the half-axis beyond the spindle end b.
-    const int steps_t = options.rows, steps_h = 24;
+    const int steps_t = rows, steps_h = 24;
     Points q(static_cast<Eigen::Index>(steps_t) * steps_h, 3);
     for (int i = 0; i < steps_t; ++i) {
       const Line l = motion.ruling(static_cast<double>(i) / (steps_t - 1));
@@ -145,25 +223,58 @@ Patch evaluate_patch(const SurfaceIndex& index, const Motion& motion, const Cutt
     patch.collision.holder_clear = clearance >= 0.0;
   }
 
-  if (options.envelope || options.coverage) {
-    const Mesh omega = envelope_mesh(motion, cutter, grid, &patch.envelope);
-    if (options.coverage && omega.F.rows() > 0) {
+  if (options.envelope) {
+    const Mesh omega = envelope_mesh(grid, nullptr);
+    patch.envelope.V = omega.V;
+    patch.envelope.F = omega.F;
+    patch.envelope.rows = grid.rows;
+    patch.envelope.cols = grid.cols;
+    patch.envelope.error.resize(reported.error.size());
+    for (Eigen::Index k = 0; k < reported.error.size(); ++k)
+      patch.envelope.error(k) = reported.omega_interior[static_cast<std::size_t>(k)]
+                                    ? reported.error(k)
+                                    : std::numeric_limits<double>::quiet_NaN();
+  }
+  if (options.coverage) {
+    // Covered: the Φ vertices whose nearest point on Ω is inside Ω, within tolerance, and on
+    // a part of Ω that is itself within omega_band tolerances of Φ (or beyond Φ's edge).
+    std::vector<char> good(reported.omega_valid.size());
+    for (std::size_t k = 0; k < good.size(); ++k)
+      good[k] = reported.omega_valid[k] &&
+                (!reported.omega_interior[k] ||
+                 std::abs(reported.error(static_cast<Eigen::Index>(k))) <= options.omega_band * options.tolerance);
+    const Mesh omega = envelope_mesh(grid, &good);
+    if (omega.F.rows() > 0) {
       const SurfaceIndex omega_index(omega);
-      const Mesh& phi = index.mesh();
-      const std::vector<ClosestPoint> cp = omega_index.closest_points(phi.V);
+      // Only the Φ vertices near Ω can be covered: query those.
+      Vec3 lo = Vec3::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+      for (Eigen::Index f = 0; f < omega.F.rows(); ++f)
+        for (int c = 0; c < 3; ++c) {
+          lo = lo.cwiseMin(Vec3(omega.V.row(omega.F(f, c)).transpose()));
+          hi = hi.cwiseMax(Vec3(omega.V.row(omega.F(f, c)).transpose()));
+        }
+      lo.array() -= options.tolerance, hi.array() += options.tolerance;
+      const Mesh& phi = (given ? given : &index)->mesh();
+      std::vector<int> near;
+      for (int v = 0; v < phi.vertex_count(); ++v) {
+        const Vec3 p = phi.V.row(v).transpose();
+        if ((p.array() >= lo.array()).all() && (p.array() <= hi.array()).all()) near.push_back(v);
+      }
+      Points queries(static_cast<Eigen::Index>(near.size()), 3);
+      for (std::size_t k = 0; k < near.size(); ++k) queries.row(static_cast<Eigen::Index>(k)) = phi.V.row(near[k]);
+      const std::vector<ClosestPoint> cp = omega_index.closest_points(queries);
       const VecX area = vertex_areas(phi);
       double covered = 0.0;
-      for (int v = 0; v < phi.vertex_count(); ++v) {
-        const ClosestPoint& f = cp[static_cast<std::size_t>(v)];
+      for (std::size_t k = 0; k < near.size(); ++k) {
+        const ClosestPoint& f = cp[k];
         if (f.face >= 0 && !f.boundary && f.distance <= options.tolerance) {
-          patch.covered_vertices.push_back(v);
-          covered += area(v);
+          patch.covered_vertices.push_back(near[k]);
+          covered += area(near[k]);
         }
       }
       patch.covered_area = covered;
       patch.coverage_fraction = covered / std::max(1e-300, area.sum());
     }
-    if (!options.envelope) patch.envelope = {};
   }
   return patch;
 }

@@ -1,6 +1,6 @@
-// Patch evaluation (DESIGN "Machined surface Ω and error"): signed error of the sphere
-// family against Φ, the machined surface Ω as a mesh, the Φ area it covers within
-// tolerance, the whole-cutter gouge check and the holder clearance.
+// Patch evaluation (DESIGN "Machined surface Ω and error"): the machined surface Ω of a cutter
+// and its motion, sampled on a (t, s) grid, its signed deviation from Φ, the Φ area it covers
+// within tolerance, the whole-cutter gouge check and the holder clearance.
 #pragma once
 
 #include <string>
@@ -13,34 +13,77 @@
 
 namespace flank {
 
-// e(t_i, s_j) = dist(R(t_i, s_j), Φ) − d(s_j) on a uniform grid over [0, 1]².
+// One uniform (t, s) grid over [0, 1]², row-major over t, measured two ways:
+// - the sphere of every sample (centre R(t, s), radius d(s)): e_sphere = dist(R, Φ) − d, the
+//   paper's ε (eq. 13); negative anywhere along the whole cutter means the cutter gouges;
+// - the machined surface itself: Ω's point of every sample (the envelope point, R + d n) and
+//   its signed distance to Φ, e = ±dist(Ω, Φ) (+: material left, −: gouge). This is the error
+//   of what is really cut: where the envelope's contact point is not the sphere's nearest point
+//   to Φ, e_sphere says nothing of Ω.
 struct ErrorGrid {
   int rows = 0, cols = 0;
-  VecX error;                 // rows·cols, row-major over t; signed (negative: gouge)
-  std::vector<char> interior; // footpoint inside Φ (not beyond its boundary)
-  std::vector<int> faces;     // footpoint faces (warm starts for a finer pass)
-  Points directions;          // unit g of every sample (from Φ toward the sphere centre)
-  double at(int i, int j) const { return error(i * cols + j); }
-  bool inside(int i, int j) const { return interior[static_cast<std::size_t>(i * cols + j)] != 0; }
+  // Spheres.
+  VecX sphere_error;           // e_sphere; beyond Φ's boundary the unsigned distance − d
+  std::vector<char> interior;  // the centre's footpoint is inside Φ (not beyond its boundary)
+  std::vector<int> faces;      // footpoint faces of the centres (warm starts)
+  Points directions;           // unit g of every centre (from Φ toward the centre)
+  // Ω.
+  Points omega;                      // envelope points (the centre where there is none)
+  std::vector<char> omega_valid;     // the envelope point exists (|d′| < L, the axis moves across itself)
+  std::vector<char> omega_interior;  // valid and its footpoint is inside Φ
+  VecX error;                        // signed deviation e of Ω from Φ where omega_interior, else 0
+
+  std::size_t index(int i, int j) const { return static_cast<std::size_t>(i) * cols + j; }
+  double at(int i, int j) const { return error(static_cast<Eigen::Index>(index(i, j))); }
+  // Ω's sample counts toward the error: it exists and lies over Φ.
+  bool inside(int i, int j) const { return omega_interior[index(i, j)] != 0; }
 };
 
 ErrorGrid sample_errors(const SurfaceIndex& index, const Motion& motion, const Cutter& cutter,
                         int rows, int cols);
 
+// What a sample of the grid is worth against a tolerance.
+enum class SampleClass : char {
+  within,    // Ω lies over Φ within tolerance
+  overhang,  // beyond Φ's edge (the cutter overhangs the part): no error, no gain
+  outside,   // out of tolerance, or the sphere reaches into Φ, or Ω has no point over Φ here
+};
+std::vector<SampleClass> classify_samples(const ErrorGrid& grid, double tolerance);
+
 struct EvaluateOptions {
   double tolerance = 0.0;  // absolute, > 0
-  int rows = 200;          // samples along t for errors and Ω
-  int cols = 60;           // samples along s
+  int rows = 200;          // samples along t for errors and Ω (at least, with `spacing`)
+  int cols = 60;           // samples along s (at least, with `spacing`)
+  // When > 0: more rows and columns where needed so that neighbouring axis samples are at most
+  // this far apart (absolute), up to max_samples in all. Ω's mesh must follow Φ's curvature
+  // within a fraction of the tolerance, and the error be seen between samples: a fixed count
+  // is too coarse on a long sweep and wasted on a short one.
+  double spacing = 0.0;
+  int max_samples = 60000;
   bool holder = false;
   double holder_length = 0.0;
   double holder_radius = 0.0;
-  bool envelope = true;  // build Ω as a mesh
-  bool coverage = true;  // measure the covered Φ area (needs Ω)
+  bool envelope = true;  // keep Ω as a mesh in the patch (for envelopes.ply)
+  bool coverage = true;  // measure the covered Φ area
+  // Coverage counts a Φ vertex within tolerance of Ω only where Ω itself lies within this
+  // multiple of the tolerance of Φ (or beyond Φ's edge): Ω's false parts, folds where the
+  // motion reverses or a surface crossing Φ at an angle, pass near some vertices without
+  // cutting them. Twice, not once: on a scanned Φ the distance from Ω to Φ's nearest vertex
+  // carries that vertex's noise, and a vertex within tolerance would count as uncovered
+  // because a noisy neighbour is not. tests/check_patches.py applies the same rule.
+  double omega_band = 2.0;
 
   std::string validate() const;
 };
 
+// `index` is the surface the solver works on. `given` (optional) is Φ as given when `index` is
+// a smoothed copy of it (same vertices and faces): the trim decisions, the good parts of Ω and
+// judged_gouge then come from `index`, while the reported errors and the coverage (Φ's vertices
+// within tolerance of Ω) are measured against `given`.
 Patch evaluate_patch(const SurfaceIndex& index, const Motion& motion, const Cutter& cutter,
-                     const EvaluateOptions& options);
+                     const EvaluateOptions& options, const SurfaceIndex* given = nullptr);
+
+// The rows and columns evaluate_patch samples (see EvaluateOptions::spacing).
+std::pair<int, int> evaluation_grid(const Motion& motion, const Cutter& cutter, const EvaluateOptions& options);
 
 }  // namespace flank

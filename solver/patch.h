@@ -10,11 +10,17 @@
 
 namespace flank {
 
+// Against Φ as given: e is Ω's signed deviation where Ω lies over Φ; the gouge also counts
+// every sphere of the whole cutter (every s, every t).
 struct PatchError {
   double max = 0.0;           // max |e| over the evaluated samples of Ω
   double rms = 0.0;           // rms of e
-  double max_gouge = 0.0;     // max(−e, 0) over the whole cutter (every s, every t)
+  double max_gouge = 0.0;     // max(−e, 0) over Ω and the whole cutter
   double max_relative = 0.0;  // max / bbox diagonal of Φ
+  // The gouge the patch was judged on: against the smoothed Φ the solver worked on when Φ is
+  // noisy (see solver/surface_noise.h), else max_gouge. A scan's noise puts single vertices
+  // above any surface the cutter could leave; they are not what the cutter gouges.
+  double judged_gouge = 0.0;
 };
 
 struct Collision {

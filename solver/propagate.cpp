@@ -1,8 +1,8 @@
 #include "solver/propagate.h"
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
-#include <cstdlib>
 #include <limits>
 #include <numbers>
 
@@ -19,6 +19,7 @@ const char* to_string(PropagateStop stop) {
     case PropagateStop::max_travel: return "travel cap";
     case PropagateStop::stalled: return "stalled (the corrector undoes the sweep)";
     case PropagateStop::degenerate: return "degenerate";
+    case PropagateStop::profile_error: return "the cutter no longer fits";
   }
   return "unknown";
 }
@@ -40,6 +41,9 @@ RefinedLine refine_line(const SurfaceIndex& index, const Line& start,
   const double L = start.length();
   auto score = [&](const Movability& m) {
     if (!m.ok()) return std::numeric_limits<double>::infinity();
+    if (options.kind && ((options.radius_min > 0 && m.radius_min < options.radius_min) ||
+                         (options.radius_max > 0 && m.radius_max > options.radius_max)))
+      return std::numeric_limits<double>::infinity();
     const double misfit = options.kind ? m.profile_rms / L : 0.0;
     return m.value + options.profile_weight * misfit * misfit;
   };
@@ -167,10 +171,19 @@ struct Stepper {
   // Corrector of the predictor–corrector continuation: one Gauss–Newton step on the line's
   // five degrees of freedom back to the start line's distance profile (the same cutter).
   // Without it the weakly determined sliding of cone-like lines integrates into drift.
-  Line correct(const Line& l) {
+  // `sweep`: the direction of travel (⟂ the axis), held still with hold_sweep. `residual`
+  // receives the largest predicted distance misfit after the step.
+  Line correct(const Line& l, const Vec3& sweep, double* residual, double* inside) {
     std::vector<ClosestPoint> cp;
     const std::vector<double> d = distances(l, &cp);
     const int n = options.movability.samples;
+    if (inside) {
+      int fresh = 0;
+      for (int i = 0; i < n; ++i)
+        fresh += std::isfinite(d[i]) &&
+                 !(options.covered_faces && (*options.covered_faces)[static_cast<std::size_t>(cp[i].face)]);
+      *inside = static_cast<double>(fresh) / n;
+    }
     const Vec3 u = (l.b - l.a).normalized(), n1 = u.unitOrthogonal(), n2 = u.cross(n1);
     Eigen::Matrix<double, 5, 5> H = Eigen::Matrix<double, 5, 5>::Zero();
     Eigen::Matrix<double, 5, 1> g = Eigen::Matrix<double, 5, 1>::Zero();
@@ -184,7 +197,16 @@ struct Stepper {
       g += k * (d[i] - profile[i]);
     }
     if (!(H.trace() > 0)) return l;
-    H.diagonal().array() += 1e-6 * H.trace();  // the sweep itself is free: keep it still
+    const double trace = H.trace();
+    H.diagonal().array() += 1e-6 * trace;  // the sweep itself is free: keep it still
+    if (options.hold_sweep && sweep.squaredNorm() > 0) {
+      // Each end may not move along the sweep: a stiff spring, as strong as the whole fit.
+      const Vec3 w = (sweep - sweep.dot(u) * u).normalized();
+      Eigen::Matrix<double, 5, 1> ka, kb;
+      ka << w.dot(n1), w.dot(n2), 0, 0, 0;
+      kb << 0, 0, w.dot(n1), w.dot(n2), 0;
+      H.noalias() += trace * (ka * ka.transpose() + kb * kb.transpose());
+    }
     // Axial position: where the part's edge crosses the line, it must cross it where it did at
     // the start. A cylinder may slide along its axis at no cost in distance, and the true
     // motion does slide (a′·u ≠ 0), so without this the line walks off the part's width.
@@ -199,15 +221,29 @@ struct Stepper {
       shift += (now - edge_start[e]) * L;
       ++ends;
     }
-    if (std::getenv("FLANK_TRACE_PROPAGATE"))
-      std::fprintf(stderr, "  edges start %.4f %.4f now %.4f %.4f shift %.4f\n", edge_start[0], edge_start[1],
-                   edge_now[0], edge_now[1], ends ? shift / ends : 0.0);
+    if (options.trace) {
+      char line[160];
+      std::snprintf(line, sizeof line, "  edges start %.4f %.4f now %.4f %.4f shift %.4f", edge_start[0],
+                    edge_start[1], edge_now[0], edge_now[1], ends ? shift / ends : 0.0);
+      options.trace(line);
+    }
     if (ends > 0) {
       const double w = 0.5 * n;
       H(4, 4) += w;
       g(4) -= w * shift / ends;
     }
     const Eigen::Matrix<double, 5, 1> x = -H.ldlt().solve(g);
+    if (residual) {
+      *residual = 0.0;
+      for (int i = 0; i < n; ++i) {
+        if (!std::isfinite(d[i]) || !std::isfinite(profile[i])) continue;
+        const double s = movability_sample(i, n);
+        const Vec3& gi = cp[i].direction;
+        Eigen::Matrix<double, 5, 1> k;
+        k << (1 - s) * gi.dot(n1), (1 - s) * gi.dot(n2), s * gi.dot(n1), s * gi.dot(n2), gi.dot(u);
+        *residual = std::max(*residual, std::abs(d[i] - profile[i] + k.dot(x)));
+      }
+    }
     return rigid({l.a + x(0) * n1 + x(1) * n2 + x(4) * u, l.b + x(2) * n1 + x(3) * n2 + x(4) * u});
   }
 
@@ -227,7 +263,7 @@ struct Stepper {
 };
 
 PropagateStop run(Stepper& st, const Line& start, const Vec3& initial_dir, double h,
-                  double max_travel, std::vector<Line>* out, double* worst) {
+                  double max_travel, std::vector<Line>* out, std::vector<double>* inside, double* worst) {
   Line cur = start;
   Vec3 ref = initial_dir;
   double travel = 0.0;
@@ -240,9 +276,12 @@ PropagateStop run(Stepper& st, const Line& start, const Vec3& initial_dir, doubl
     if (mv.status == MovabilityStatus::jump) return PropagateStop::jump;
     if (mv.value > st.options.max_movability) return PropagateStop::max_movability;
     *worst = std::max(*worst, mv.value);
-    if (std::getenv("FLANK_TRACE_PROPAGATE"))
-      std::fprintf(stderr, "step %zu F %.3g other %.3g alpha %.3f a %.2f %.2f %.2f\n", out->size(), mv.value,
-                   mv.value_other, mv.alpha, cur.a.x(), cur.a.y(), cur.a.z());
+    if (st.options.trace) {
+      char line[160];
+      std::snprintf(line, sizeof line, "step %zu F %.3g other %.3g alpha %.3f a %.2f %.2f %.2f", out->size(),
+                    mv.value, mv.value_other, mv.alpha, cur.a.x(), cur.a.y(), cur.a.z());
+      st.options.trace(line);
+    }
     // RK2 (midpoint rule); the speed of the midpoint across the axis is 1, so h is a length.
     const Vec3 u = (cur.b - cur.a).normalized();
     const Vec3 vm1 = 0.5 * (va + vb) - u.dot(0.5 * (va + vb)) * u;
@@ -251,7 +290,10 @@ PropagateStop run(Stepper& st, const Line& start, const Vec3& initial_dir, doubl
     Movability mv2;
     if (!st.velocity(half, vm1, &va2, &vb2, &mv2) || !mv2.ok()) return PropagateStop::left_surface;
     const Line pred = st.rigid({cur.a + h * va2, cur.b + h * vb2});
-    const Line next = st.correct(pred);
+    double residual = 0.0, inside_fraction = 0.0;
+    const Line next = st.correct(pred, vm1, &residual, &inside_fraction);
+    if (st.options.max_profile_error > 0 && residual > st.options.max_profile_error)
+      return PropagateStop::profile_error;
     ref = 0.5 * (va2 + vb2);
     ref -= u.dot(ref) * u;
     const double progress = (0.5 * (next.a + next.b) - 0.5 * (cur.a + cur.b)).norm();
@@ -260,6 +302,7 @@ PropagateStop run(Stepper& st, const Line& start, const Vec3& initial_dir, doubl
     if (progress < 0.25 * h) return PropagateStop::stalled;
     travel += progress;
     out->push_back(next);
+    inside->push_back(inside_fraction);
     cur = next;
   }
 }
@@ -276,9 +319,14 @@ Propagation propagate(const SurfaceIndex& index, const Line& start,
   Stepper st{index, po, std::vector<int>(static_cast<std::size_t>(options.movability.samples), -1),
              start.length(), {}};
   st.step = h;
+  double fresh0 = 0.0;
   {
     std::vector<ClosestPoint> cp;
     st.profile = st.distances(start, &cp);
+    for (std::size_t i = 0; i < cp.size(); ++i)
+      fresh0 += std::isfinite(st.profile[i]) &&
+                !(po.covered_faces && (*po.covered_faces)[static_cast<std::size_t>(cp[i].face)]);
+    fresh0 /= std::max<std::size_t>(1, cp.size());
     for (int e = 0; e < 2; ++e) st.edge_start[e] = st.edge(start, e == 0, e == 0 ? 0.0 : 1.0, &st.edge_hint[e]);
     st.reset_edges();
   }
@@ -286,18 +334,23 @@ Propagation propagate(const SurfaceIndex& index, const Line& start,
   p.max_movability = m0.value;
   if (!m0.ok()) {
     p.rulings = {start};
+    p.fresh = {fresh0};
     return p;
   }
   const Vec3 dir = m0.mu1 * m0.n1 + m0.mu2 * m0.n2;
   std::vector<Line> forward, backward;
-  p.stop_forward = run(st, start, dir, h, cap, &forward, &p.max_movability);
+  std::vector<double> inside_forward, inside_backward;
+  p.stop_forward = run(st, start, dir, h, cap, &forward, &inside_forward, &p.max_movability);
   std::fill(st.hints.begin(), st.hints.end(), -1);
   st.reset_edges();
-  p.stop_backward = run(st, start, -dir, h, cap, &backward, &p.max_movability);
+  p.stop_backward = run(st, start, -dir, h, cap, &backward, &inside_backward, &p.max_movability);
   p.rulings.assign(backward.rbegin(), backward.rend());
+  p.fresh.assign(inside_backward.rbegin(), inside_backward.rend());
   p.start_index = static_cast<int>(p.rulings.size());
   p.rulings.push_back(start);
+  p.fresh.push_back(fresh0);
   p.rulings.insert(p.rulings.end(), forward.begin(), forward.end());
+  p.fresh.insert(p.fresh.end(), inside_forward.begin(), inside_forward.end());
   return p;
 }
 

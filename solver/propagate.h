@@ -3,6 +3,7 @@
 // (§4.3), or take a user's ordered lines as control polygons (§4.4).
 #pragma once
 
+#include <functional>
 #include <optional>
 #include <string>
 #include <vector>
@@ -22,6 +23,10 @@ struct RefineLineOptions {
   // along itself while its distances vary could look perfectly movable on an envelope.
   std::optional<CutterKind> kind;
   double profile_weight = 1.0;
+  // With `kind`: candidates whose profile leaves these sphere radii (absolute; 0: no bound)
+  // are no candidates. On a part near an exact envelope, a whole family of tilted lines has
+  // F_l ≈ 0 and a profile of the kind (the radius ↔ offset valley), some with radii no tool has.
+  double radius_min = 0.0, radius_max = 0.0;
 };
 
 struct RefinedLine {
@@ -48,13 +53,31 @@ struct PropagateOptions {
   double step = 0.0;              // midpoint step; 0: 1e-3 × bbox diagonal (DESIGN)
   double max_movability = 1e-3;   // ε_move: stop when F_l exceeds it
   double max_travel = 0.0;        // midpoint path cap each way; 0: 4 × bbox diagonal
+  // Stop when the corrected line's footpoint distances differ from the start line's by more
+  // than this anywhere (absolute; 0: never): the start's cutter can no longer follow Φ. On a
+  // real surface this, not F_l, is what ends a sweep: F_l is a rate, and the corrector undoes
+  // most of the drift it predicts.
+  double max_profile_error = 0.0;
+  // The corrector restores the distance profile by moving the line toward or away from Φ and
+  // along its axis, never back along the sweep: where the profile cannot be kept exactly
+  // (any real surface), a free sweep component lets the least-squares step pull the line
+  // back onto itself and the sweep stalls.
+  bool hold_sweep = true;
+  // Faces that count as covered already (#F 0/1, not owned; null: none): Propagation::fresh
+  // counts only samples whose footpoint is on another face.
+  const std::vector<char>* covered_faces = nullptr;
+  // One line per step when set (F_l, the other sweep, sliding, Φ's edges): diagnostics.
+  std::function<void(const std::string&)> trace;
 };
 
-enum class PropagateStop { max_movability, left_surface, jump, max_travel, stalled, degenerate };
+enum class PropagateStop { max_movability, left_surface, jump, max_travel, stalled, degenerate, profile_error };
 const char* to_string(PropagateStop stop);
 
 struct Propagation {
   std::vector<Line> rulings;  // in motion order, the start line among them
+  // Per ruling: the fraction of its samples whose footpoint is inside Φ and not on a covered
+  // face (PropagateOptions::covered_faces): what the sweep passes over that is still to cut.
+  std::vector<double> fresh;
   int start_index = 0;
   PropagateStop stop_backward = PropagateStop::degenerate;
   PropagateStop stop_forward = PropagateStop::degenerate;

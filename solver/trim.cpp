@@ -1,5 +1,6 @@
 #include "solver/trim.h"
 
+#include <algorithm>
 #include <cmath>
 #include <vector>
 
@@ -9,77 +10,137 @@ std::string FitPatchOptions::validate() const {
   if (std::string e = fit.validate(); !e.empty()) return e;
   if (!(tolerance > 0.0) || !std::isfinite(tolerance)) return "tolerance must be positive";
   if (max_rounds < 0) return "trim rounds must not be negative";
+  if (pieces.min_rows < 2 || pieces.min_cols < 2) return "a piece needs at least 2 by 2 samples";
   return {};
 }
 
 namespace {
-// Longest run of `ok` entries; ties keep the first. Returns false when there is none.
-bool longest_run(const std::vector<char>& ok, int* begin, int* end) {
-  int best = 0, run_start = 0;
-  bool found = false;
-  for (int i = 0; i <= static_cast<int>(ok.size()); ++i) {
-    if (i < static_cast<int>(ok.size()) && ok[i]) continue;
-    if (i - run_start > best) {
-      best = i - run_start;
-      *begin = run_start, *end = i - 1;
-      found = true;
+
+// The best rectangle within rows [r_begin, r_end) (see find_trim).
+TrimRange best_rectangle(const std::vector<SampleClass>& cls, int rows, int cols, int r_begin,
+                         int r_end, const PieceOptions& o) {
+  TrimRange best;
+  if (r_end - r_begin < o.min_rows) return best;
+  auto at = [&](int i, int j) { return cls[static_cast<std::size_t>(i) * cols + j]; };
+  std::vector<char> bad(static_cast<std::size_t>(rows));
+  std::vector<int> within(static_cast<std::size_t>(rows));
+  // Every column range [c0, c1], and within it the best run of rows with no sample out of
+  // tolerance: O(cols² · rows), a few hundred thousand steps on an evaluation grid.
+  for (int c0 = 0; c0 < cols; ++c0) {
+    std::fill(bad.begin(), bad.end(), 0);
+    std::fill(within.begin(), within.end(), 0);
+    for (int c1 = c0; c1 < cols; ++c1) {
+      for (int i = r_begin; i < r_end; ++i) {
+        bad[i] |= at(i, c1) == SampleClass::outside;
+        within[i] += at(i, c1) == SampleClass::within;
+      }
+      if (c1 - c0 + 1 < o.min_cols) continue;
+      int run_start = r_begin, sum = 0;
+      for (int i = r_begin; i <= r_end; ++i) {
+        if (i < r_end && !bad[i]) {
+          sum += within[i];
+          continue;
+        }
+        if (i - run_start >= o.min_rows && sum > best.within) {
+          best.row0 = run_start, best.row1 = i - 1, best.col0 = c0, best.col1 = c1;
+          best.within = sum;
+          best.empty = false;
+        }
+        run_start = i + 1;
+        sum = 0;
+      }
     }
-    run_start = i + 1;
   }
-  return found;
+  if (best.empty) return best;
+  // Grow by the rows and columns beside it that hold nothing out of tolerance (ties of the
+  // search above keep the smaller rectangle: a column of pure overhang adds no sample).
+  auto clean_row = [&](int i, int c0, int c1) {
+    for (int j = c0; j <= c1; ++j)
+      if (at(i, j) == SampleClass::outside) return false;
+    return true;
+  };
+  auto clean_col = [&](int j, int r0, int r1) {
+    for (int i = r0; i <= r1; ++i)
+      if (at(i, j) == SampleClass::outside) return false;
+    return true;
+  };
+  for (bool grew = true; grew;) {
+    grew = false;
+    if (best.row0 > r_begin && clean_row(best.row0 - 1, best.col0, best.col1)) --best.row0, grew = true;
+    if (best.row1 + 1 < r_end && clean_row(best.row1 + 1, best.col0, best.col1)) ++best.row1, grew = true;
+    if (best.col0 > 0 && clean_col(best.col0 - 1, best.row0, best.row1)) --best.col0, grew = true;
+    if (best.col1 + 1 < cols && clean_col(best.col1 + 1, best.row0, best.row1)) ++best.col1, grew = true;
+  }
+  // Shrink to the rows and columns that hold samples within tolerance, plus one of pure
+  // overhang past each end: the last sample inside Φ may lie up to a sample spacing short of
+  // Φ's edge, and cutting there would leave a strip uncut.
+  int rw0 = best.row1, rw1 = best.row0, cw0 = best.col1, cw1 = best.col0;
+  for (int i = best.row0; i <= best.row1; ++i)
+    for (int j = best.col0; j <= best.col1; ++j)
+      if (at(i, j) == SampleClass::within) {
+        rw0 = std::min(rw0, i), rw1 = std::max(rw1, i);
+        cw0 = std::min(cw0, j), cw1 = std::max(cw1, j);
+      }
+  best.row0 = std::max(best.row0, rw0 - 1), best.row1 = std::min(best.row1, rw1 + 1);
+  best.col0 = std::max(best.col0, cw0 - 1), best.col1 = std::min(best.col1, cw1 + 1);
+  return best;
 }
+
+void collect_pieces(const std::vector<SampleClass>& cls, int rows, int cols, int r_begin, int r_end,
+                    const PieceOptions& o, int floor, std::vector<TrimRange>* out) {
+  const TrimRange r = best_rectangle(cls, rows, cols, r_begin, r_end, o);
+  if (r.empty || r.within < floor) return;
+  out->push_back(r);
+  collect_pieces(cls, rows, cols, r_begin, r.row0, o, floor, out);
+  collect_pieces(cls, rows, cols, r.row1 + 1, r_end, o, floor, out);
+}
+
 }  // namespace
 
-TrimRange find_trim(const ErrorGrid& grid, double tolerance) {
-  TrimRange range;
-  std::vector<char> row_ok(static_cast<std::size_t>(grid.rows), 0);
-  std::vector<char> row_out(static_cast<std::size_t>(grid.rows), 0);  // nothing inside Φ
-  for (int i = 0; i < grid.rows; ++i) {
-    int inside = 0;
-    bool within = true;
-    for (int j = 0; j < grid.cols; ++j) {
-      if (!grid.inside(i, j)) continue;
-      ++inside;
-      if (std::abs(grid.at(i, j)) > tolerance) within = false;
-    }
-    // Samples beyond Φ's boundary are overhang, not error: a row goes only when it is out of
-    // tolerance or has nothing inside Φ at all.
-    row_ok[i] = within && inside > 0;
-    row_out[i] = inside == 0;
-  }
-  if (!longest_run(row_ok, &range.row0, &range.row1)) return range;
-  // Keep one sample of pure overhang past each end: the run's last sample inside Φ may lie up
-  // to a sample spacing short of Φ's edge, and cutting there leaves a strip uncut.
-  if (range.row0 > 0 && row_out[range.row0 - 1]) --range.row0;
-  if (range.row1 < grid.rows - 1 && row_out[range.row1 + 1]) ++range.row1;
-  std::vector<char> col_ok(static_cast<std::size_t>(grid.cols), 0);
-  std::vector<char> col_out(static_cast<std::size_t>(grid.cols), 0);
-  for (int j = 0; j < grid.cols; ++j) {
-    int inside = 0;
-    bool within = true;
-    for (int i = range.row0; i <= range.row1; ++i) {
-      if (!grid.inside(i, j)) continue;
-      ++inside;
-      if (std::abs(grid.at(i, j)) > tolerance) within = false;
-    }
-    col_ok[j] = within && inside > 0;
-    col_out[j] = inside == 0;
-  }
-  if (!longest_run(col_ok, &range.col0, &range.col1)) return range;
-  if (range.col0 > 0 && col_out[range.col0 - 1]) --range.col0;
-  if (range.col1 < grid.cols - 1 && col_out[range.col1 + 1]) ++range.col1;
-  range.empty = false;
-  return range;
+TrimRange find_trim(const ErrorGrid& grid, double tolerance, const PieceOptions& options) {
+  return best_rectangle(classify_samples(grid, tolerance), grid.rows, grid.cols, 0, grid.rows, options);
 }
 
-Cutter restrict_cutter(const Cutter& cutter, double s0, double s1) {
+std::vector<TrimRange> find_pieces(const ErrorGrid& grid, double tolerance, const PieceOptions& options) {
+  const std::vector<SampleClass> cls = classify_samples(grid, tolerance);
+  std::vector<TrimRange> out;
+  const TrimRange best = best_rectangle(cls, grid.rows, grid.cols, 0, grid.rows, options);
+  if (best.empty) return out;
+  out.push_back(best);
+  const int floor = std::max(1, static_cast<int>(std::ceil(options.min_fraction * best.within)));
+  collect_pieces(cls, grid.rows, grid.cols, 0, best.row0, options, floor, &out);
+  collect_pieces(cls, grid.rows, grid.cols, best.row1 + 1, grid.rows, options, floor, &out);
+  // Best first; ties in their order along t.
+  std::stable_sort(out.begin() + 1, out.end(),
+                   [](const TrimRange& a, const TrimRange& b) { return a.within > b.within; });
+  if (static_cast<int>(out.size()) > options.max_pieces) out.resize(static_cast<std::size_t>(options.max_pieces));
+  return out;
+}
+
+Cutter restrict_cutter(const Cutter& cutter, double s0, double s1, double radius_min, double radius_max) {
   const int samples = 41;
   std::vector<double> s(samples), r(samples);
   for (int k = 0; k < samples; ++k) {
     s[k] = static_cast<double>(k) / (samples - 1);
     r[k] = cutter.radius(s0 + s[k] * (s1 - s0));
   }
-  return Cutter::fit(cutter.kind, cutter.length * (s1 - s0), s, r);
+  Cutter out = Cutter::fit(cutter.kind, cutter.length * (s1 - s0), s, r);
+  // The bases are non-negative and sum to one: coefficients in range keep d(s) in range.
+  for (Eigen::Index k = 0; k < out.coeffs.size(); ++k) {
+    if (radius_min > 0) out.coeffs(k) = std::max(out.coeffs(k), radius_min);
+    if (radius_max > 0) out.coeffs(k) = std::min(out.coeffs(k), radius_max);
+  }
+  return out;
+}
+
+PieceStart restrict_to(const Motion& motion, const Cutter& cutter, const TrimRange& range,
+                       const ErrorGrid& grid, double radius_min, double radius_max) {
+  const double t0 = static_cast<double>(range.row0) / (grid.rows - 1);
+  const double t1 = static_cast<double>(range.row1) / (grid.rows - 1);
+  const double s0 = static_cast<double>(range.col0) / (grid.cols - 1);
+  const double s1 = static_cast<double>(range.col1) / (grid.cols - 1);
+  return {motion.restricted(t0, t1, s0, s1, motion.count()),
+          restrict_cutter(cutter, s0, s1, radius_min, radius_max)};
 }
 
 FitPatchResult fit_and_trim(const SurfaceIndex& index, const Motion& init,
@@ -95,35 +156,36 @@ FitPatchResult fit_and_trim(const SurfaceIndex& index, const Motion& init,
     }
     const ErrorGrid grid = sample_errors(index, out.fit.motion, out.fit.cutter, fo.samples_t,
                                          fo.samples_s);
-    const TrimRange range = find_trim(grid, options.tolerance);
-    if (range.empty || range.row1 - range.row0 + 1 < options.min_rows) {
+    std::vector<TrimRange> pieces;
+    if (out.rounds == 0 && options.keep_pieces)
+      pieces = find_pieces(grid, options.tolerance, options.pieces);
+    else if (TrimRange r = find_trim(grid, options.tolerance, options.pieces); !r.empty)
+      pieces.push_back(r);
+    if (pieces.empty()) {
       out.status = FitPatchStatus::nothing_within_tolerance;
       out.message = "no part of the motion is within tolerance";
       return out;
     }
-    if (range.full(grid) || out.rounds >= options.max_rounds) {
+    for (std::size_t k = 1; k < pieces.size(); ++k)
+      out.other_pieces.push_back(restrict_to(out.fit.motion, out.fit.cutter, pieces[k], grid,
+                                             fo.radius_min, fo.radius_max));
+    const TrimRange& range = pieces.front();
+    if (range.full(grid)) {
       out.status = FitPatchStatus::ok;
-      // The last round may still hold rows out of tolerance: cut them without a refit.
-      if (!range.full(grid)) {
-        const double t0 = static_cast<double>(range.row0) / (grid.rows - 1);
-        const double t1 = static_cast<double>(range.row1) / (grid.rows - 1);
-        const double s0 = static_cast<double>(range.col0) / (grid.cols - 1);
-        const double s1 = static_cast<double>(range.col1) / (grid.cols - 1);
-        out.fit.motion = out.fit.motion.restricted(t0, t1, s0, s1, out.fit.motion.count());
-        out.fit.cutter = restrict_cutter(out.fit.cutter, s0, s1);
-        out.fit.length = out.fit.cutter.length;
-      }
       return out;
     }
-    const double t0 = static_cast<double>(range.row0) / (grid.rows - 1);
-    const double t1 = static_cast<double>(range.row1) / (grid.rows - 1);
-    const double s0 = static_cast<double>(range.col0) / (grid.cols - 1);
-    const double s1 = static_cast<double>(range.col1) / (grid.cols - 1);
-    const Motion next = out.fit.motion.restricted(t0, t1, s0, s1, out.fit.motion.count());
-    const Cutter cutter = restrict_cutter(out.fit.cutter, s0, s1);
-    fo.length = cutter.length;
+    const PieceStart next = restrict_to(out.fit.motion, out.fit.cutter, range, grid, fo.radius_min, fo.radius_max);
+    if (out.rounds >= options.max_rounds) {
+      // The last round may still hold samples out of tolerance: cut them without a refit.
+      out.status = FitPatchStatus::ok;
+      out.fit.motion = next.motion;
+      out.fit.cutter = next.cutter;
+      out.fit.length = next.cutter.length;
+      return out;
+    }
+    fo.length = next.cutter.length;
     ++out.rounds;
-    out.fit = fit_motion(index, next, fo, &cutter);
+    out.fit = fit_motion(index, next.motion, fo, &next.cutter);
   }
 }
 

@@ -1,0 +1,317 @@
+#include "solver/candidate_lines.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <limits>
+#include <numbers>
+
+namespace flank {
+
+std::string CandidateLineOptions::validate() const {
+  if (kinds.empty()) return "at least one cutter kind is needed";
+  if (!(radius_min > 0) || !(radius_max >= radius_min) || !std::isfinite(radius_max))
+    return "the radius range needs 0 < MIN <= MAX";
+  if (!(length_min > 0) || !(length_max >= length_min) || !std::isfinite(length_max))
+    return "the length range needs 0 < MIN <= MAX";
+  if (directions < 1 || tilts < 1 || radii < 1 || lengths < 1 || directions_kept < 1)
+    return "candidate counts must be positive";
+  if (coarse_samples < 4 || fine_samples < 4) return "movability needs at least 4 samples per line";
+  if (fine_candidates < 1) return "at least one line per seed must be rescored";
+  if (!(overhang >= 0 && overhang < 0.5)) return "overhang must be in [0, 0.5)";
+  if (refine_rounds < 0 || refine_candidates < 1) return "local search settings out of range";
+  if (!(step > 0) || !(max_travel > 0)) return "the probe sweep needs a positive step and travel";
+  return {};
+}
+
+namespace {
+
+// F_l alone is a narrow hole: on an exact envelope it is ~1e-9 on the ruling and ~5e-6
+// already 0.2 mm off it, flat beyond. The misfit of the cutter profile grows linearly with
+// the offset instead (about 0.014 mm per mm on the paper's part), so weighted in it leads a
+// local search into the hole from millimetres away.
+constexpr double kProfileWeight = 1e3;
+
+double line_score(const Movability& m, double L) {
+  const double misfit = m.profile_rms / L;
+  return m.value + kProfileWeight * misfit * misfit;
+}
+
+// Values spread geometrically over [lo, hi], the top first.
+std::vector<double> geometric(double lo, double hi, int count) {
+  std::vector<double> v;
+  for (int k = 0; k < count; ++k) {
+    const double f = count == 1 ? 1.0 : 1.0 - static_cast<double>(k) / (count - 1);
+    v.push_back(lo * std::pow(hi / lo, f));
+  }
+  return v;
+}
+
+// A line's cutter is a real tool: its sphere radii fit the allowed range and its meridian is
+// valid, with some slack where the fit will correct the line.
+bool acceptable(const Movability& m, const CandidateLineOptions& o, double L) {
+  return m.ok() && m.max_slope < 0.9 * L && m.radius_min >= 0.9 * o.radius_min &&
+         m.radius_max <= 1.1 * o.radius_max;
+}
+
+struct Scored {
+  Line line;
+  Movability movability;
+  double score = std::numeric_limits<double>::infinity();
+};
+
+}  // namespace
+
+FreeRun free_run(const SurfaceIndex& index, const Vec3& mid, const Vec3& u, double reach,
+                 const CoveredFaces& covered) {
+  FreeRun run;
+  int hint = -1;
+  auto free_at = [&](double x) {
+    const ClosestPoint cp = index.closest_point(mid + x * u, hint);
+    if (cp.face >= 0) hint = cp.face;
+    return cp.face >= 0 && !cp.boundary && (covered.empty() || !covered[static_cast<std::size_t>(cp.face)]);
+  };
+  const double step = reach / 64.0;
+  for (int side = 0; side < 2; ++side) {
+    const double sign = side == 0 ? -1.0 : 1.0;
+    hint = -1;
+    double in = 0.0, out = std::numeric_limits<double>::quiet_NaN();
+    for (double x = step; x <= reach + 1e-12 * reach; x += step) {
+      if (!free_at(sign * x)) {
+        out = x;
+        break;
+      }
+      in = x;
+    }
+    double end = reach;
+    if (std::isfinite(out)) {
+      for (int k = 0; k < 6; ++k) {
+        const double m = 0.5 * (in + out);
+        (free_at(sign * m) ? in : out) = m;
+      }
+      end = 0.5 * (in + out);
+    }
+    (side == 0 ? run.low : run.high) = end;
+    (side == 0 ? run.low_open : run.high_open) = !std::isfinite(out);
+  }
+  return run;
+}
+
+Line lay_line(const Vec3& mid, const Vec3& u, double L, const FreeRun& run, double overhang) {
+  const double length = run.low + run.high;
+  double from;  // where the line starts, as a signed distance from mid along u
+  if (length <= L) {
+    from = 0.5 * (run.high - run.low) - 0.5 * L;
+  } else {
+    const bool near_low = !run.low_open && run.low < 0.75 * L;
+    const bool near_high = !run.high_open && run.high < 0.75 * L;
+    if (near_low && (!near_high || run.low <= run.high))
+      from = -run.low - overhang * L;
+    else if (near_high)
+      from = run.high + overhang * L - L;
+    else
+      from = -0.5 * L;
+  }
+  return {mid + from * u, mid + (from + L) * u};
+}
+
+std::vector<LineCandidate> seed_candidates(const SurfaceIndex& index, const Seed& seed, int seed_id,
+                                           const CoveredFaces& covered,
+                                           const CandidateLineOptions& o,
+                                           const Thresholds& thresholds, long long* scored) {
+  const double L_ref = std::sqrt(o.length_min * o.length_max);
+  const CutterKind general = o.kinds.back();
+  // The profiles that steer the search: the barrel where allowed, and the most general kind.
+  std::vector<CutterKind> steer;
+  for (CutterKind k : o.kinds)
+    if (k == CutterKind::barrel) steer.push_back(k);
+  if (steer.empty() || steer.front() != general) steer.push_back(general);
+  // Directions are scored with the most general profile: which direction sweeps should not
+  // depend on a profile the search has not yet chosen.
+  MovabilityOptions coarse;
+  coarse.samples = o.coarse_samples;
+  coarse.profile = general;
+  // A line through a seed near Φ's edge overhangs it: lay_line fits it to Φ later.
+  coarse.max_boundary_fraction = 0.5;
+  std::vector<Scored> all;
+  std::vector<int> hints(static_cast<std::size_t>(o.coarse_samples), -1);
+  for (double r : geometric(o.radius_min, o.radius_max, o.radii))
+    for (int t = 0; t < o.tilts; ++t) {
+      const double tilt = o.tilts == 1 ? 0.0
+                                       : (-1.0 + 2.0 * t / (o.tilts - 1)) * o.max_tilt_deg *
+                                             std::numbers::pi / 180.0;
+      std::fill(hints.begin(), hints.end(), -1);
+      for (int d = 0; d < o.directions; ++d) {
+        const double th = std::numbers::pi * d / o.directions;
+        const Vec3 tangent = std::cos(th) * seed.dir_min + std::sin(th) * seed.dir_max;
+        const Vec3 u = std::cos(tilt) * tangent + std::sin(tilt) * seed.normal;
+        const Vec3 mid = seed.point + r * seed.normal;
+        Scored c;
+        c.line = {mid - 0.5 * L_ref * u, mid + 0.5 * L_ref * u};
+        // Warm start from the previous direction's footpoints: neighbours share faces.
+        c.movability = movability(index, c.line.a, c.line.b, coarse, hints);
+        ++*scored;
+        if (!acceptable(c.movability, o, L_ref)) continue;
+        c.score = line_score(c.movability, L_ref);
+        all.push_back(c);
+      }
+    }
+  auto by_score = [](const Scored& x, const Scored& y) { return x.score < y.score; };
+  // Stable: ties never depend on anything but generation order.
+  std::stable_sort(all.begin(), all.end(), by_score);
+  if (static_cast<int>(all.size()) > o.fine_candidates) all.resize(static_cast<std::size_t>(o.fine_candidates));
+  MovabilityOptions fine = coarse;
+  fine.samples = o.fine_samples;
+
+  // Aim: each of the best is laid over the free part of Φ at the longest length that fits
+  // there (L0) and aimed anew at that length, over the offsets and a few small turns, with each
+  // steering profile. A short line cannot tell directions apart that a long one can: at the
+  // reference length a line 15° off a ruling may score as well as the ruling.
+  const std::vector<double> radii = geometric(o.radius_min, o.radius_max, o.radii);
+  const double turn = o.aim_turn_deg * std::numbers::pi / 180.0;
+  struct Aimed {
+    Vec3 u = Vec3::Zero();
+    double L0 = 0.0;
+    std::vector<Line> start;      // per steering kind
+    std::vector<double> score;    // per steering kind
+    double best = std::numeric_limits<double>::infinity();
+  };
+  std::vector<Aimed> aimed;
+  for (const Scored& c : all) {
+    Aimed a;
+    a.u = (c.line.b - c.line.a).normalized();
+    const Vec3 mid0 = 0.5 * (c.line.a + c.line.b);
+    const FreeRun run0 = free_run(index, mid0, a.u, o.length_max, covered);
+    a.L0 = std::clamp((run0.low + run0.high) * (1.0 + 2.0 * o.overhang), o.length_min, o.length_max);
+    const Line laid = lay_line(mid0, a.u, a.L0, run0, o.overhang);
+    const Vec3 centre = 0.5 * (laid.a + laid.b);
+    const Vec3 w1 = seed.normal.cross(a.u).normalized(), w2 = a.u.cross(w1);
+    std::vector<Vec3> dirs{a.u};
+    for (const Vec3& w : {w1, w2})
+      for (double sgn : {-1.0, 1.0}) dirs.push_back((std::cos(turn) * a.u + sgn * std::sin(turn) * w).normalized());
+    for (CutterKind steering : steer) {
+      MovabilityOptions mo = fine;
+      mo.profile = steering;
+      Line best_line = laid;
+      double best = std::numeric_limits<double>::infinity();
+      for (const Vec3& d : dirs)
+        for (double r : radii) {
+          // The laid line's middle moved to offset r along the seed's normal.
+          const Vec3 m = centre + (seed.point + r * seed.normal - mid0);
+          const Line l{m - 0.5 * a.L0 * d, m + 0.5 * a.L0 * d};
+          const Movability mv = movability(index, l.a, l.b, mo);
+          ++*scored;
+          if (!acceptable(mv, o, a.L0)) continue;
+          const double sc = line_score(mv, a.L0);
+          if (sc < best) best = sc, best_line = l;
+        }
+      a.start.push_back(best_line);
+      a.score.push_back(best);
+      a.best = std::min(a.best, best);
+    }
+    aimed.push_back(std::move(a));
+  }
+  std::stable_sort(aimed.begin(), aimed.end(), [](const Aimed& x, const Aimed& y) { return x.best < y.best; });
+
+  // The best distinct directions, each refined and laid across the free part of Φ at a few
+  // lengths.
+  std::vector<Vec3> kept_dirs;
+  std::vector<LineCandidate> out;
+  const double cos_distinct = std::cos(o.distinct_deg * std::numbers::pi / 180.0);
+  for (const Aimed& a : aimed) {
+    if (!std::isfinite(a.best) || static_cast<int>(kept_dirs.size()) >= o.directions_kept) break;
+    bool distinct = true;
+    for (const Vec3& k : kept_dirs) distinct &= std::abs(a.u.dot(k)) < cos_distinct;
+    if (!distinct) continue;
+    kept_dirs.push_back(a.u);
+    for (std::size_t si = 0; si < steer.size(); ++si) {
+      const CutterKind steering = steer[si];
+      if (!std::isfinite(a.score[si])) continue;
+      const Line& start = a.start[si];
+      // The local search (Fig. 8) refines the axis once, laid at the longest length; the
+      // shorter lengths are laid along the refined axis.
+      RefineLineOptions ro;
+      ro.kind = steering;
+      ro.movability = fine;
+      ro.movability.samples = o.refine_samples;
+      ro.movability.profile = steering;
+      ro.candidates_per_end = o.refine_candidates;
+      ro.rounds = o.refine_rounds;
+      ro.profile_weight = kProfileWeight;
+      ro.radius_min = o.radius_min;
+      ro.radius_max = o.radius_max;
+      const RefinedLine refined = refine_line(index, start, ro);
+      *scored += refined.evaluated;
+      if (o.trace) {
+        char line[400];
+        std::snprintf(line, sizeof line,
+                      "seed %d direction %.3f,%.3f,%.3f L0 %.2f aimed score %.2e; refined with %s: F_l %.2e, misfit "
+                      "%.2e, radii %.2f..%.2f",
+                      seed_id, a.u.x(), a.u.y(), a.u.z(), a.L0, a.score[si], std::string(to_string(steering)).c_str(),
+                      refined.movability.value, refined.movability.profile_rms, refined.movability.radius_min,
+                      refined.movability.radius_max);
+        o.trace(line);
+      }
+      if (!refined.movability.ok()) continue;
+      const Vec3 axis = (refined.line.b - refined.line.a).normalized();
+      const Vec3 mid = 0.5 * (refined.line.a + refined.line.b);
+      const FreeRun run = free_run(index, mid, axis, o.length_max, covered);
+      double L = std::clamp((run.low + run.high) * (1.0 + 2.0 * o.overhang), o.length_min, o.length_max);
+      for (int k = 0; k < o.lengths; ++k, L *= 0.5) {
+        if (L < o.length_min * (1.0 - 1e-9)) break;
+        LineCandidate lc;
+        lc.line = lay_line(mid, axis, L, run, o.overhang);
+        // The simplest allowed kind that follows the line's distances; the most general one
+        // must at least fit them within line_misfit.
+        bool found = false;
+        for (CutterKind kind : o.kinds) {
+          MovabilityOptions mk = fine;
+          mk.profile = kind;
+          const Movability m = movability(index, lc.line.a, lc.line.b, mk);
+          ++*scored;
+          const double limit = kind == general ? thresholds.line_misfit : thresholds.kind_misfit;
+          if (acceptable(m, o, L) && m.profile_rms <= limit) {
+            lc.kind = kind;
+            lc.movability = m;
+            found = true;
+            break;
+          }
+        }
+        if (!found) continue;
+        lc.seed = seed_id;
+        lc.score = line_score(lc.movability, L);
+        lc.inside = L * (lc.movability.samples - lc.movability.boundary_samples) /
+                    std::max(1, lc.movability.samples);
+        PropagateOptions po;
+        po.movability.samples = o.probe_samples;
+        po.movability.max_boundary_fraction = 0.5;
+        po.step = o.step;
+        po.max_travel = o.max_travel;
+        // The sweep ends where its cutter stops fitting (max_profile_error), not on a rate: F_l
+        // here only guards against a line thrown off Φ (0.1 mm of approach per mm of travel).
+        po.max_movability = 1e-2;
+        po.max_profile_error = thresholds.sweep_misfit;
+        if (!covered.empty()) po.covered_faces = &covered;
+        lc.sweep = propagate(index, lc.line, po);
+        // The area still to cut that the sweep passes over: per step, the length over
+        // uncovered Φ times the travel across the line (a line that turns as it sweeps travels
+        // farther than it sweeps).
+        for (std::size_t r = 1; r < lc.sweep.rulings.size(); ++r) {
+          const Line& p = lc.sweep.rulings[r - 1];
+          const Line& q = lc.sweep.rulings[r];
+          const Vec3 step = 0.5 * (q.a + q.b) - 0.5 * (p.a + p.b);
+          const Vec3 along = (q.b - q.a).normalized();
+          const double across = (step - step.dot(along) * along).norm();
+          lc.swept += across;
+          lc.estimate += across * q.length() * 0.5 * (lc.sweep.fresh[r - 1] + lc.sweep.fresh[r]);
+        }
+        if (lc.sweep.rulings.size() >= 4) out.push_back(std::move(lc));
+      }
+    }
+  }
+  std::stable_sort(out.begin(), out.end(),
+                   [](const LineCandidate& x, const LineCandidate& y) { return x.estimate > y.estimate; });
+  return out;
+}
+
+}  // namespace flank

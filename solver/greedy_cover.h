@@ -1,0 +1,58 @@
+// The greedy cover of the automatic decomposition (DESIGN "Greedy cover"): from a pool of
+// candidate patches, repeatedly take the one that adds the most uncovered area of Φ (ties: the
+// lower error, then the lower pool index) until the coverage target, the patch cap, or a gain
+// below the minimum. What stays uncovered is reported as edge-connected regions, for ball-end
+// finishing.
+#pragma once
+
+#include <vector>
+
+#include "kernels/mesh.h"
+#include "solver/patch.h"
+
+namespace flank {
+
+struct CoverOptions {
+  double coverage_target = 0.95;  // stop at this covered fraction of Φ's area
+  int max_patches = 20;           // patches in the cover, in all
+  double min_gain = 0.005;        // a patch must add at least this fraction of Φ's area
+  int max_picks = 0;              // picks in this call; 0: no limit
+};
+
+// The state of a cover: which patch covers each Φ vertex, and what is picked so far.
+struct Cover {
+  std::vector<int> vertex_patch;  // #V: the index into `picks` covering it, −1 if none
+  std::vector<char> used;         // per pool entry: picked
+  std::vector<int> picks;         // pool indices in the order picked
+  std::vector<double> curve;      // covered fraction after each pick
+  double covered_area = 0.0;
+  double total_area = 0.0;
+
+  double fraction() const { return total_area > 0 ? covered_area / total_area : 0.0; }
+};
+
+// An empty cover of Φ (vertex areas `area`, #V).
+Cover empty_cover(const VecX& area);
+
+// Extends `cover` by greedy picks from `pool` (entries already used are skipped; `used` grows
+// to the pool's size). Deterministic: the order of the pool decides ties.
+void greedy_cover(const std::vector<Patch>& pool, const VecX& area, const CoverOptions& options,
+                  Cover* cover);
+
+// Local improvement of a cover (the greedy choice is myopic: an early large patch may leave
+// gaps that no later one fills well): while some swap of a picked patch for an unpicked one of
+// the pool covers more area, make the best such swap. The number of patches stays; the picks
+// are then re-ordered greedily (largest gain first) and the cover rebuilt. Deterministic.
+void improve_cover(const std::vector<Patch>& pool, const VecX& area, int max_swaps, Cover* cover);
+
+struct UncoveredRegion {
+  double area = 0.0;
+  Vec3 centroid = Vec3::Zero();
+  int vertices = 0;
+};
+
+// Edge-connected regions of uncovered vertices (vertex_patch < 0), largest first.
+std::vector<UncoveredRegion> uncovered_regions(const Mesh& mesh, const std::vector<int>& vertex_patch,
+                                               const VecX& area);
+
+}  // namespace flank

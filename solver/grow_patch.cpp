@@ -1,0 +1,161 @@
+#include "solver/grow_patch.h"
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+
+namespace flank {
+
+std::string GrowOptions::validate() const {
+  if (std::string e = fit.validate(); !e.empty()) return e;
+  if (std::string e = thresholds.validate(); !e.empty()) return e;
+  if (trim_rounds < 0) return "trim rounds must not be negative";
+  if (length_min < 0) return "the minimum length must not be negative";
+  return {};
+}
+
+std::string reject_reason(const Patch& p, const GrowOptions& o) {
+  if (p.covered_vertices.empty()) return "covers nothing";
+  if (p.error.judged_gouge > o.thresholds.gouge) return "gouges";
+  if (o.evaluate.holder && !p.collision.holder_clear) return "holder collides";
+  if (!p.cutter.valid()) return "invalid cutter";
+  if (p.cutter.length < o.length_min * (1.0 - 1e-9)) return "cutter shorter than allowed";
+  constexpr double kSlack = 1e-9;
+  const double lo = o.fit.radius_min, hi = o.fit.radius_max;
+  for (int k = 0; k <= 100; ++k) {
+    const double r = p.cutter.radius(k / 100.0);
+    if ((lo > 0 && r < lo * (1 - kSlack)) || (hi > 0 && r > hi * (1 + kSlack))) return "radius out of range";
+  }
+  return {};
+}
+
+namespace {
+
+// Trim the fitted motion to pieces that keep the cutter within the allowed lengths.
+FitPatchOptions trim_options(const GrowOptions& o, double length) {
+  FitPatchOptions fo;
+  fo.fit = o.fit;
+  fo.fit.length = length;
+  fo.tolerance = o.thresholds.tolerance;
+  fo.max_rounds = o.trim_rounds;
+  fo.pieces = o.pieces;
+  if (length > 0 && o.length_min > 0)
+    fo.pieces.min_cols = std::max(fo.pieces.min_cols,
+                                  static_cast<int>(std::ceil((o.fit.samples_s - 1) * o.length_min / length)) + 1);
+  return fo;
+}
+
+Patch evaluate(const SurfaceIndex& index, const FitResult& fit, const GrowOptions& o) {
+  EvaluateOptions eo = o.evaluate;
+  eo.tolerance = o.thresholds.tolerance;
+  eo.coverage = true;
+  return evaluate_patch(index, fit.motion, fit.cutter, eo, o.given);
+}
+
+void trace_piece(const GrowOptions& o, const LineCandidate& c, int piece, const FitPatchResult& fit,
+                 const Patch* p, const std::string& why) {
+  if (!o.trace) return;
+  char line[320];
+  if (!p) {
+    std::snprintf(line, sizeof line, "grow seed %d L %.2f piece %d: %s", c.seed, c.line.length(), piece,
+                  fit.message.c_str());
+  } else {
+    std::snprintf(line, sizeof line,
+                  "grow seed %d L %.2f est %.4g piece %d: %s L %.2f r %.3f..%.3f trims %d, covers %.2f%%, "
+                  "max |e| %.2e, gouge %.2e: %s",
+                  c.seed, c.line.length(), c.estimate, piece, std::string(to_string(p->cutter.kind)).c_str(),
+                  p->cutter.length, p->cutter.radius(0), p->cutter.radius(1), fit.rounds,
+                  100.0 * p->coverage_fraction, p->error.max, p->error.max_gouge, why.empty() ? "kept" : why.c_str());
+  }
+  o.trace(line);
+}
+
+}  // namespace
+
+Grown grow_patch(const SurfaceIndex& index, const LineCandidate& c, const GrowOptions& o) {
+  Grown out;
+  if (c.sweep.rulings.size() < 4) return out;
+  const int K = o.fit.control_points > 0 ? o.fit.control_points : 16;
+  const Motion init = Motion::fit(c.sweep.rulings, K);
+  FitPatchOptions fo = trim_options(o, c.line.length());
+  fo.fit.kind = c.kind;
+  fo.keep_pieces = true;
+  const FitPatchResult first = fit_and_trim(index, init, fo);
+  std::vector<FitPatchResult> fits{first};
+  fo.keep_pieces = false;
+  for (const PieceStart& piece : first.other_pieces) {
+    FitPatchOptions po = trim_options(o, piece.cutter.length);
+    po.fit.kind = c.kind;
+    fits.push_back(fit_and_trim(index, piece.motion, po, &piece.cutter));
+  }
+
+  for (std::size_t k = 0; k < fits.size(); ++k) {
+    ++out.pieces;
+    if (fits[k].status != FitPatchStatus::ok) {
+      trace_piece(o, c, static_cast<int>(k), fits[k], nullptr, {});
+      continue;
+    }
+    Patch p = evaluate(index, fits[k].fit, o);
+    const std::string why = reject_reason(p, o);
+    trace_piece(o, c, static_cast<int>(k), fits[k], &p, why);
+    if (why.empty()) out.patches.push_back(std::move(p));
+  }
+  std::stable_sort(out.patches.begin(), out.patches.end(),
+                   [](const Patch& a, const Patch& b) { return a.covered_area > b.covered_area; });
+  return out;
+}
+
+std::optional<Patch> finish_patch(const SurfaceIndex& index, const Patch& patch, const FinishOptions& o) {
+  const GrowOptions& g = o.grow;
+  Motion motion = patch.motion;
+  Cutter cutter = patch.cutter;
+  // A simpler kind whose least-squares radii stay within thresholds.simplify of the fitted ones
+  // moves Ω by at most that much; refitted, it is kept when it still covers as much.
+  std::vector<double> s(101), r(101);
+  for (int k = 0; k <= 100; ++k) s[k] = k / 100.0, r[k] = cutter.radius(s[k]);
+  for (CutterKind kind : o.simpler) {
+    if (coefficient_count(kind) >= coefficient_count(cutter.kind)) break;
+    const Cutter simple = Cutter::fit(kind, cutter.length, s, r);
+    double worst = 0.0;
+    for (int k = 0; k <= 100; ++k) worst = std::max(worst, std::abs(simple.radius(s[k]) - r[k]));
+    if (worst > g.thresholds.simplify) continue;
+    FitPatchOptions so = trim_options(g, cutter.length);
+    so.fit.kind = kind;
+    const FitPatchResult refit = fit_and_trim(index, motion, so, &simple);
+    if (refit.status != FitPatchStatus::ok) continue;
+    const Patch p = evaluate(index, refit.fit, g);
+    if (reject_reason(p, g).empty() && p.covered_area >= 0.99 * patch.covered_area) {
+      motion = refit.fit.motion;
+      cutter = refit.fit.cutter;
+      break;
+    }
+  }
+  EvaluateOptions eo = o.evaluate;
+  eo.tolerance = g.thresholds.tolerance;
+  eo.coverage = true;
+  // The fine grid sees what the fit's coarse one missed: a fold where the motion turns, or a
+  // corner out of tolerance. Cut to its best rectangle (no refit: the fit is done) so that the
+  // patch holds only what it cuts within tolerance.
+  // A cut motion is a new spline, sampled anew: repeat until its grid holds nothing out of
+  // tolerance (a few rounds at most; what still fails is no patch).
+  constexpr int kFineTrims = 4;
+  for (int round = 0;; ++round) {
+    const auto [rows, cols] = evaluation_grid(motion, cutter, eo);
+    const ErrorGrid grid = sample_errors(index, motion, cutter, rows, cols);
+    PieceOptions po = g.pieces;
+    if (cutter.length > 0 && g.length_min > 0)
+      po.min_cols = std::max(po.min_cols, static_cast<int>(std::ceil((cols - 1) * g.length_min / cutter.length)) + 1);
+    const TrimRange range = find_trim(grid, g.thresholds.tolerance, po);
+    if (range.empty) return std::nullopt;
+    if (range.full(grid)) break;
+    if (round == kFineTrims) return std::nullopt;
+    const PieceStart cut = restrict_to(motion, cutter, range, grid, g.fit.radius_min, g.fit.radius_max);
+    motion = cut.motion;
+    cutter = cut.cutter;
+  }
+  Patch p = evaluate_patch(index, motion, cutter, eo, g.given);
+  if (!reject_reason(p, g).empty()) return std::nullopt;
+  return p;
+}
+
+}  // namespace flank

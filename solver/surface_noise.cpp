@@ -1,0 +1,162 @@
+#include "solver/surface_noise.h"
+
+#include <Eigen/Cholesky>
+#include <algorithm>
+#include <cmath>
+#include <vector>
+
+#include "kernels/parallel.h"
+
+namespace flank {
+
+namespace {
+
+struct Adjacency {
+  std::vector<int> offsets, neighbours;  // CSR, 1-ring, ascending
+};
+
+Adjacency one_rings(const Mesh& mesh) {
+  const int V = mesh.vertex_count();
+  std::vector<std::vector<int>> rings(static_cast<std::size_t>(V));
+  for (int f = 0; f < mesh.face_count(); ++f)
+    for (int k = 0; k < 3; ++k) {
+      const int a = mesh.F(f, k), b = mesh.F(f, (k + 1) % 3);
+      rings[a].push_back(b);
+      rings[b].push_back(a);
+    }
+  Adjacency adj;
+  adj.offsets.assign(1, 0);
+  for (auto& r : rings) {
+    std::sort(r.begin(), r.end());
+    r.erase(std::unique(r.begin(), r.end()), r.end());
+    adj.neighbours.insert(adj.neighbours.end(), r.begin(), r.end());
+    adj.offsets.push_back(static_cast<int>(adj.neighbours.size()));
+  }
+  return adj;
+}
+
+// Area-weighted vertex normals (unit, oriented like F).
+Points vertex_normals(const Mesh& mesh) {
+  Points N = Points::Zero(mesh.vertex_count(), 3);
+  for (int f = 0; f < mesh.face_count(); ++f) {
+    const Vec3 a = mesh.V.row(mesh.F(f, 0)), b = mesh.V.row(mesh.F(f, 1)), c = mesh.V.row(mesh.F(f, 2));
+    const Vec3 n = (b - a).cross(c - a);  // twice the area times the unit normal
+    for (int k = 0; k < 3; ++k) N.row(mesh.F(f, k)) += n.transpose();
+  }
+  for (int v = 0; v < mesh.vertex_count(); ++v) {
+    const double len = N.row(v).norm();
+    if (len > 0) N.row(v) /= len;
+  }
+  return N;
+}
+
+struct Projection {
+  bool ok = false;
+  double residual = 0.0;  // height of the vertex above the fitted quadric
+  double leverage = 0.0;  // the fit's own weight of the vertex (hat matrix diagonal)
+};
+
+// Quadric height field h = a x² + b xy + c y² + d x + e y + f over v's 2-ring, in v's normal
+// frame, v at the origin.
+Projection project(const Mesh& mesh, const Adjacency& adj, const Points& normals, int v,
+                   std::vector<int>& mark, std::vector<int>& ring, int stamp) {
+  ring.clear();
+  ring.push_back(v);
+  mark[static_cast<std::size_t>(v)] = stamp;
+  for (int pass = 0, begin = 0; pass < 2; ++pass) {
+    const int end = static_cast<int>(ring.size());
+    for (int k = begin; k < end; ++k)
+      for (int i = adj.offsets[ring[k]]; i < adj.offsets[ring[k] + 1]; ++i) {
+        const int w = adj.neighbours[i];
+        if (mark[static_cast<std::size_t>(w)] == stamp) continue;
+        mark[static_cast<std::size_t>(w)] = stamp;
+        ring.push_back(w);
+      }
+    begin = end;
+  }
+  Projection out;
+  if (ring.size() < 10) return out;  // too few to fit six coefficients with redundancy
+  const Vec3 n = normals.row(v).transpose();
+  if (!(n.squaredNorm() > 0.5)) return out;
+  const Vec3 e1 = n.unitOrthogonal(), e2 = n.cross(e1);
+  const Vec3 p0 = mesh.V.row(v).transpose();
+  Eigen::Matrix<double, 6, 6> A = Eigen::Matrix<double, 6, 6>::Zero();
+  Eigen::Matrix<double, 6, 1> rhs = Eigen::Matrix<double, 6, 1>::Zero();
+  double scale = 0.0;
+  for (int w : ring) scale = std::max(scale, (Vec3(mesh.V.row(w).transpose()) - p0).norm());
+  if (!(scale > 0)) return out;
+  for (int w : ring) {
+    const Vec3 d = (Vec3(mesh.V.row(w).transpose()) - p0) / scale;
+    const double x = d.dot(e1), y = d.dot(e2), h = d.dot(n);
+    Eigen::Matrix<double, 6, 1> b;
+    b << x * x, x * y, y * y, x, y, 1.0;
+    A.noalias() += b * b.transpose();
+    rhs += h * b;
+  }
+  Eigen::LDLT<Eigen::Matrix<double, 6, 6>> ldlt(A);
+  if (ldlt.info() != Eigen::Success || !(ldlt.rcond() > 1e-12)) return out;
+  const Eigen::Matrix<double, 6, 1> c = ldlt.solve(rhs);
+  Eigen::Matrix<double, 6, 1> b0 = Eigen::Matrix<double, 6, 1>::Zero();
+  b0(5) = 1.0;
+  out.ok = true;
+  out.residual = -c(5) * scale;  // v is at height 0; the quadric at height c(5)
+  out.leverage = b0.dot(ldlt.solve(b0));
+  return out;
+}
+
+}  // namespace
+
+NoiseEstimate estimate_noise(const Mesh& mesh) {
+  NoiseEstimate out;
+  const int V = mesh.vertex_count();
+  if (V == 0) return out;
+  const Adjacency adj = one_rings(mesh);
+  const Points normals = vertex_normals(mesh);
+  // Every vertex is measured (the work is a 6 × 6 solve each); per-vertex storage and a serial
+  // median keep it independent of the thread count.
+  std::vector<double> scaled(static_cast<std::size_t>(V), -1.0);
+  constexpr std::size_t kBlock = 1024;
+  const std::size_t blocks = (static_cast<std::size_t>(V) + kBlock - 1) / kBlock;
+  parallel_for(0, blocks, [&](std::size_t b0, std::size_t b1) {
+    std::vector<int> mark(static_cast<std::size_t>(V), -1), ring;
+    for (std::size_t b = b0; b < b1; ++b)
+      for (std::size_t v = b * kBlock; v < std::min<std::size_t>(V, (b + 1) * kBlock); ++v) {
+        const Projection p = project(mesh, adj, normals, static_cast<int>(v), mark, ring, static_cast<int>(v));
+        // The residual of a least-squares fit at a point it includes has variance σ²(1 − h).
+        if (p.ok && p.leverage < 0.95) scaled[v] = std::abs(p.residual) / std::sqrt(1.0 - p.leverage);
+      }
+  }, 1);
+  std::vector<double> values;
+  for (double s : scaled)
+    if (s >= 0) values.push_back(s);
+  out.vertices = static_cast<int>(values.size());
+  if (values.empty()) return out;
+  auto mid = values.begin() + static_cast<std::ptrdiff_t>(values.size() / 2);
+  std::nth_element(values.begin(), mid, values.end());
+  out.sigma = 1.4826 * *mid;  // the median absolute deviation of a Gaussian is 0.6745 σ
+  return out;
+}
+
+Mesh smooth_surface(const Mesh& mesh, int passes) {
+  Mesh out = mesh;
+  const int V = mesh.vertex_count();
+  const Adjacency adj = one_rings(mesh);
+  for (int pass = 0; pass < passes; ++pass) {
+    const Points normals = vertex_normals(out);
+    Points moved = out.V;
+    constexpr std::size_t kBlock = 1024;
+    const std::size_t blocks = (static_cast<std::size_t>(V) + kBlock - 1) / kBlock;
+    parallel_for(0, blocks, [&](std::size_t b0, std::size_t b1) {
+      std::vector<int> mark(static_cast<std::size_t>(V), -1), ring;
+      for (std::size_t b = b0; b < b1; ++b)
+        for (std::size_t v = b * kBlock; v < std::min<std::size_t>(V, (b + 1) * kBlock); ++v) {
+          const Projection p = project(out, adj, normals, static_cast<int>(v), mark, ring, static_cast<int>(v));
+          if (p.ok) moved.row(static_cast<Eigen::Index>(v)) -= p.residual * normals.row(static_cast<Eigen::Index>(v));
+        }
+    }, 1);
+    out.V = moved;
+  }
+  return out;
+}
+
+}  // namespace flank
