@@ -73,4 +73,18 @@ Mesh subdivide_midpoint(const Mesh& mesh) {
   return out;
 }
 
+Points vertex_normals(const Mesh& mesh) {
+  Points N = Points::Zero(mesh.vertex_count(), 3);
+  for (int f = 0; f < mesh.face_count(); ++f) {
+    const Vec3 a = mesh.V.row(mesh.F(f, 0)), b = mesh.V.row(mesh.F(f, 1)), c = mesh.V.row(mesh.F(f, 2));
+    const Vec3 n = (b - a).cross(c - a);  // twice the area times the unit normal
+    for (int k = 0; k < 3; ++k) N.row(mesh.F(f, k)) += n.transpose();
+  }
+  for (int v = 0; v < mesh.vertex_count(); ++v) {
+    const double len = N.row(v).norm();
+    if (len > 0) N.row(v) /= len;
+  }
+  return N;
+}
+
 }  // namespace flank

@@ -24,6 +24,8 @@ BoundingBox bounding_box(const Mesh& mesh);
 double bbox_diagonal(const Mesh& mesh);
 // #F by 3 unit face normals (right-hand rule on F's order).
 Points face_normals(const Mesh& mesh);
+// #V unit area-weighted vertex normals, oriented like F (zero for unused vertices).
+Points vertex_normals(const Mesh& mesh);
 // #F face areas.
 VecX face_areas(const Mesh& mesh);
 // #V barycentric vertex areas (a third of each incident face): the area a vertex stands for.

@@ -127,7 +127,7 @@ DecomposeResult decompose(const SurfaceIndex& index, const DecomposeOptions& o, 
   out.noise = estimate_noise(index.mesh());
   std::unique_ptr<SurfaceIndex> smoothed;
   if (out.noise.sigma > o.noise_fraction * o.tolerance) {
-    smoothed = std::make_unique<SurfaceIndex>(smooth_surface(index.mesh(), o.smoothing_passes));
+    smoothed = std::make_unique<SurfaceIndex>(smooth_surface(index.mesh(), o.smoothing_passes, o.smoothing_rings));
     out.smoothed = true;
     say("the surface is noisy (sigma " + std::to_string(out.noise.sigma) + " mm): fitting on a smoothed copy");
   }

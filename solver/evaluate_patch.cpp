@@ -20,7 +20,7 @@ std::string EvaluateOptions::validate() const {
 }
 
 ErrorGrid sample_errors(const SurfaceIndex& index, const Motion& motion, const Cutter& cutter,
-                        int rows, int cols) {
+                        int rows, int cols, bool untrusted_edges) {
   ErrorGrid grid;
   grid.rows = rows, grid.cols = cols;
   const std::size_t n = static_cast<std::size_t>(rows) * cols;
@@ -75,10 +75,40 @@ ErrorGrid sample_errors(const SurfaceIndex& index, const Motion& motion, const C
       }
     }
   });
+  // The sweep across the axis, at the axis midpoint: a row where it is slow (a fifth of the
+  // median) or reverses against a neighbour row is where the motion stalls or turns back.
+  {
+    std::vector<Vec3> across(static_cast<std::size_t>(rows));
+    std::vector<double> speed(static_cast<std::size_t>(rows));
+    for (int i = 0; i < rows; ++i) {
+      const Vec3 u = (rulings[i].b - rulings[i].a).normalized();
+      const Vec3 v = 0.5 * (a_t[i] + b_t[i]);
+      across[i] = v - v.dot(u) * u;
+      speed[i] = across[i].norm();
+    }
+    std::vector<double> sorted = speed;
+    std::nth_element(sorted.begin(), sorted.begin() + rows / 2, sorted.end());
+    const double slow = 0.2 * sorted[static_cast<std::size_t>(rows / 2)];
+    grid.sweeps.assign(static_cast<std::size_t>(rows), 1);
+    for (int i = 0; i < rows; ++i) {
+      const bool back = (i > 0 && across[i].dot(across[i - 1]) < 0) ||
+                        (i + 1 < rows && across[i].dot(across[i + 1]) < 0);
+      grid.sweeps[i] = !(speed[i] < slow || back);
+    }
+  }
   // Ω's points lie near Φ, next to the centres' footpoints: warm-started, these queries are cheap.
   const std::vector<ClosestPoint> op = index.closest_points(grid.omega, grid.faces);
   grid.omega_interior.assign(n, 0);
   grid.error = VecX::Zero(static_cast<Eigen::Index>(n));
+  if (untrusted_edges) {
+    const Mesh& m = index.mesh();
+    auto at_edge = [&](int f) {
+      return f >= 0 && (index.is_boundary_vertex(m.F(f, 0)) || index.is_boundary_vertex(m.F(f, 1)) ||
+                        index.is_boundary_vertex(m.F(f, 2)));
+    };
+    grid.untrusted.assign(n, 0);
+    for (std::size_t k = 0; k < n; ++k) grid.untrusted[k] = at_edge(op[k].face) || at_edge(cp[k].face);
+  }
   for (std::size_t k = 0; k < n; ++k) {
     if (!grid.omega_valid[k] || op[k].face < 0 || op[k].boundary) continue;
     grid.omega_interior[k] = 1;
@@ -91,7 +121,11 @@ std::vector<SampleClass> classify_samples(const ErrorGrid& grid, double toleranc
   std::vector<SampleClass> out(static_cast<std::size_t>(grid.rows) * grid.cols, SampleClass::overhang);
   for (std::size_t k = 0; k < out.size(); ++k) {
     const auto e = static_cast<Eigen::Index>(k);
-    if (grid.sphere_error(e) < -tolerance)
+    if (!grid.untrusted.empty() && grid.untrusted[k])
+      out[k] = SampleClass::overhang;
+    else if (!grid.sweeps.empty() && !grid.sweeps[k / static_cast<std::size_t>(grid.cols)])
+      out[k] = SampleClass::outside;  // the motion stalls or turns back: Ω folds
+    else if (grid.sphere_error(e) < -tolerance)
       out[k] = SampleClass::outside;  // the whole cutter: a sphere reaching into Φ gouges
     else if (grid.omega_interior[k])
       out[k] = std::abs(grid.error(e)) <= tolerance ? SampleClass::within : SampleClass::outside;
@@ -169,6 +203,7 @@ GridStats stats(const ErrorGrid& grid) {
   double sum_sq = 0.0;
   int count = 0;
   for (Eigen::Index k = 0; k < grid.error.size(); ++k) {
+    if (!grid.untrusted.empty() && grid.untrusted[static_cast<std::size_t>(k)]) continue;
     st.max_gouge = std::max(st.max_gouge, -grid.sphere_error(k));  // the whole cutter, every s and t
     if (!grid.omega_interior[static_cast<std::size_t>(k)]) continue;
     const double e = grid.error(k);
@@ -180,6 +215,24 @@ GridStats stats(const ErrorGrid& grid) {
   st.rms = count ? std::sqrt(sum_sq / count) : 0.0;
   return st;
 }
+// Φ's vertices inside the bounding box of Ω's faces grown by `margin` (the only ones within
+// `margin` of Ω).
+std::vector<int> vertices_near(const Mesh& phi, const Mesh& omega, double margin) {
+  Vec3 lo = Vec3::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
+  for (Eigen::Index f = 0; f < omega.F.rows(); ++f)
+    for (int c = 0; c < 3; ++c) {
+      lo = lo.cwiseMin(Vec3(omega.V.row(omega.F(f, c)).transpose()));
+      hi = hi.cwiseMax(Vec3(omega.V.row(omega.F(f, c)).transpose()));
+    }
+  lo.array() -= margin, hi.array() += margin;
+  std::vector<int> near;
+  for (int v = 0; v < phi.vertex_count(); ++v) {
+    const Vec3 p = phi.V.row(v).transpose();
+    if ((p.array() >= lo.array()).all() && (p.array() <= hi.array()).all()) near.push_back(v);
+  }
+  return near;
+}
+
 }  // namespace
 
 Patch evaluate_patch(const SurfaceIndex& index, const Motion& motion, const Cutter& cutter,
@@ -188,7 +241,7 @@ Patch evaluate_patch(const SurfaceIndex& index, const Motion& motion, const Cutt
   patch.motion = motion;
   patch.cutter = cutter;
   const auto [rows, cols] = evaluation_grid(motion, cutter, options);
-  const ErrorGrid grid = sample_errors(index, motion, cutter, rows, cols);
+  const ErrorGrid grid = sample_errors(index, motion, cutter, rows, cols, options.untrusted_edges);
   const GridStats judged = stats(grid);
   ErrorGrid given_grid;
   if (given) given_grid = sample_errors(*given, motion, cutter, rows, cols);
@@ -199,6 +252,36 @@ Patch evaluate_patch(const SurfaceIndex& index, const Motion& motion, const Cutt
   patch.error.max_gouge = st.max_gouge;
   patch.error.judged_gouge = judged.max_gouge;
   patch.error.max_relative = st.max_abs / (given ? given : &index)->diagonal();
+
+  // The deviation seen from Φ's vertices under Ω as well: samples of Ω fall between the peaks
+  // of a scanned Φ (its noise sits at the vertices), so its largest deviation depends on the
+  // sampling; at the vertices it does not. tests/check_patches.py measures the same union.
+  {
+    // Over the part of Ω whose points lie over Φ, as the grid's errors.
+    const Mesh omega = envelope_mesh(reported, &reported.omega_interior);
+    const SurfaceIndex* phi_index = given ? given : &index;
+    if (omega.F.rows() > 0) {
+      const double band = options.vertex_band * options.tolerance;
+      const std::vector<int> near = vertices_near(phi_index->mesh(), omega, band);
+      const Mesh& phi = phi_index->mesh();
+      Points queries(static_cast<Eigen::Index>(near.size()), 3);
+      for (std::size_t k = 0; k < near.size(); ++k) queries.row(static_cast<Eigen::Index>(k)) = phi.V.row(near[k]);
+      const SurfaceIndex omega_index(omega);
+      const std::vector<ClosestPoint> cp = omega_index.closest_points(queries);
+      const Points normals = vertex_normals(phi);
+      for (std::size_t k = 0; k < near.size(); ++k) {
+        const ClosestPoint& f = cp[k];
+        if (f.face < 0 || f.boundary || f.distance > band) continue;
+        // Ω above Φ (on the tool side): material left; below: gouge.
+        const double e = (f.point - Vec3(phi.V.row(near[k]).transpose())).dot(Vec3(normals.row(near[k]).transpose())) >= 0
+                             ? f.distance
+                             : -f.distance;
+        patch.error.max = std::max(patch.error.max, std::abs(e));
+        patch.error.max_gouge = std::max(patch.error.max_gouge, -e);
+      }
+      patch.error.max_relative = patch.error.max / phi_index->diagonal();
+    }
+  }
 
   if (options.holder) {
     // The holder: a cylinder of the given radius on the half-axis beyond the spindle end b.
@@ -247,19 +330,8 @@ Patch evaluate_patch(const SurfaceIndex& index, const Motion& motion, const Cutt
     if (omega.F.rows() > 0) {
       const SurfaceIndex omega_index(omega);
       // Only the Φ vertices near Ω can be covered: query those.
-      Vec3 lo = Vec3::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
-      for (Eigen::Index f = 0; f < omega.F.rows(); ++f)
-        for (int c = 0; c < 3; ++c) {
-          lo = lo.cwiseMin(Vec3(omega.V.row(omega.F(f, c)).transpose()));
-          hi = hi.cwiseMax(Vec3(omega.V.row(omega.F(f, c)).transpose()));
-        }
-      lo.array() -= options.tolerance, hi.array() += options.tolerance;
       const Mesh& phi = (given ? given : &index)->mesh();
-      std::vector<int> near;
-      for (int v = 0; v < phi.vertex_count(); ++v) {
-        const Vec3 p = phi.V.row(v).transpose();
-        if ((p.array() >= lo.array()).all() && (p.array() <= hi.array()).all()) near.push_back(v);
-      }
+      const std::vector<int> near = vertices_near(phi, omega, options.tolerance);
       Points queries(static_cast<Eigen::Index>(near.size()), 3);
       for (std::size_t k = 0; k < near.size(); ++k) queries.row(static_cast<Eigen::Index>(k)) = phi.V.row(near[k]);
       const std::vector<ClosestPoint> cp = omega_index.closest_points(queries);

@@ -32,6 +32,14 @@ struct ErrorGrid {
   std::vector<char> omega_valid;     // the envelope point exists (|d′| < L, the axis moves across itself)
   std::vector<char> omega_interior;  // valid and its footpoint is inside Φ
   VecX error;                        // signed deviation e of Ω from Φ where omega_interior, else 0
+  // Per row: the axis sweeps on across itself there. Where the motion stalls or turns back,
+  // the envelope folds: its points there lie inside what the sweep cuts away, or swing off Φ
+  // between samples.
+  std::vector<char> sweeps;
+  // Per sample: its verdict is not to be trusted, so it counts as overhang (empty: all are).
+  // On a smoothed scan, next to Φ's edges: a one-sided neighbourhood averages little of the
+  // noise out, and what is left there is the scan's, not the cutter's.
+  std::vector<char> untrusted;
 
   std::size_t index(int i, int j) const { return static_cast<std::size_t>(i) * cols + j; }
   double at(int i, int j) const { return error(static_cast<Eigen::Index>(index(i, j))); }
@@ -39,14 +47,17 @@ struct ErrorGrid {
   bool inside(int i, int j) const { return omega_interior[index(i, j)] != 0; }
 };
 
+// `untrusted_edges`: samples whose footpoint (of Ω or of the centre) lies on a face touching
+// Φ's boundary are marked untrusted (see ErrorGrid::untrusted).
 ErrorGrid sample_errors(const SurfaceIndex& index, const Motion& motion, const Cutter& cutter,
-                        int rows, int cols);
+                        int rows, int cols, bool untrusted_edges = false);
 
 // What a sample of the grid is worth against a tolerance.
 enum class SampleClass : char {
   within,    // Ω lies over Φ within tolerance
   overhang,  // beyond Φ's edge (the cutter overhangs the part): no error, no gain
-  outside,   // out of tolerance, or the sphere reaches into Φ, or Ω has no point over Φ here
+  outside,   // out of tolerance, the sphere reaches into Φ, Ω has no point over Φ here, or the
+             // motion stalls or turns back
 };
 std::vector<SampleClass> classify_samples(const ErrorGrid& grid, double tolerance);
 
@@ -72,6 +83,12 @@ struct EvaluateOptions {
   // carries that vertex's noise, and a vertex within tolerance would count as uncovered
   // because a noisy neighbour is not. tests/check_patches.py applies the same rule.
   double omega_band = 2.0;
+  // The reported errors also count Φ's vertices within this many tolerances of Ω whose nearest
+  // point on Ω is inside it (their signed distance to Ω), Ω taken where it lies over Φ: on a
+  // scan the largest deviation sits at the vertices, between Ω's samples.
+  double vertex_band = 10.0;
+  // The surface evaluated against is a smoothed scan: see sample_errors.
+  bool untrusted_edges = false;
 
   std::string validate() const;
 };

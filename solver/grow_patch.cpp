@@ -39,6 +39,7 @@ FitPatchOptions trim_options(const GrowOptions& o, double length) {
   fo.tolerance = o.thresholds.tolerance;
   fo.max_rounds = o.trim_rounds;
   fo.pieces = o.pieces;
+  fo.untrusted_edges = o.given != nullptr;
   if (length > 0 && o.length_min > 0)
     fo.pieces.min_cols = std::max(fo.pieces.min_cols,
                                   static_cast<int>(std::ceil((o.fit.samples_s - 1) * o.length_min / length)) + 1);
@@ -49,6 +50,7 @@ Patch evaluate(const SurfaceIndex& index, const FitResult& fit, const GrowOption
   EvaluateOptions eo = o.evaluate;
   eo.tolerance = o.thresholds.tolerance;
   eo.coverage = true;
+  eo.untrusted_edges = o.given != nullptr;
   return evaluate_patch(index, fit.motion, fit.cutter, eo, o.given);
 }
 
@@ -133,6 +135,7 @@ std::optional<Patch> finish_patch(const SurfaceIndex& index, const Patch& patch,
   EvaluateOptions eo = o.evaluate;
   eo.tolerance = g.thresholds.tolerance;
   eo.coverage = true;
+  eo.untrusted_edges = g.given != nullptr;
   // The fine grid sees what the fit's coarse one missed: a fold where the motion turns, or a
   // corner out of tolerance. Cut to its best rectangle (no refit: the fit is done) so that the
   // patch holds only what it cuts within tolerance.
@@ -141,7 +144,7 @@ std::optional<Patch> finish_patch(const SurfaceIndex& index, const Patch& patch,
   constexpr int kFineTrims = 4;
   for (int round = 0;; ++round) {
     const auto [rows, cols] = evaluation_grid(motion, cutter, eo);
-    const ErrorGrid grid = sample_errors(index, motion, cutter, rows, cols);
+    const ErrorGrid grid = sample_errors(index, motion, cutter, rows, cols, eo.untrusted_edges);
     PieceOptions po = g.pieces;
     if (cutter.length > 0 && g.length_min > 0)
       po.min_cols = std::max(po.min_cols, static_cast<int>(std::ceil((cols - 1) * g.length_min / cutter.length)) + 1);

@@ -35,21 +35,6 @@ Adjacency one_rings(const Mesh& mesh) {
   return adj;
 }
 
-// Area-weighted vertex normals (unit, oriented like F).
-Points vertex_normals(const Mesh& mesh) {
-  Points N = Points::Zero(mesh.vertex_count(), 3);
-  for (int f = 0; f < mesh.face_count(); ++f) {
-    const Vec3 a = mesh.V.row(mesh.F(f, 0)), b = mesh.V.row(mesh.F(f, 1)), c = mesh.V.row(mesh.F(f, 2));
-    const Vec3 n = (b - a).cross(c - a);  // twice the area times the unit normal
-    for (int k = 0; k < 3; ++k) N.row(mesh.F(f, k)) += n.transpose();
-  }
-  for (int v = 0; v < mesh.vertex_count(); ++v) {
-    const double len = N.row(v).norm();
-    if (len > 0) N.row(v) /= len;
-  }
-  return N;
-}
-
 struct Projection {
   bool ok = false;
   double residual = 0.0;  // height of the vertex above the fitted quadric
@@ -59,11 +44,11 @@ struct Projection {
 // Quadric height field h = a x² + b xy + c y² + d x + e y + f over v's 2-ring, in v's normal
 // frame, v at the origin.
 Projection project(const Mesh& mesh, const Adjacency& adj, const Points& normals, int v,
-                   std::vector<int>& mark, std::vector<int>& ring, int stamp) {
+                   std::vector<int>& mark, std::vector<int>& ring, int stamp, int rings) {
   ring.clear();
   ring.push_back(v);
   mark[static_cast<std::size_t>(v)] = stamp;
-  for (int pass = 0, begin = 0; pass < 2; ++pass) {
+  for (int pass = 0, begin = 0; pass < rings; ++pass) {
     const int end = static_cast<int>(ring.size());
     for (int k = begin; k < end; ++k)
       for (int i = adj.offsets[ring[k]]; i < adj.offsets[ring[k] + 1]; ++i) {
@@ -121,7 +106,7 @@ NoiseEstimate estimate_noise(const Mesh& mesh) {
     std::vector<int> mark(static_cast<std::size_t>(V), -1), ring;
     for (std::size_t b = b0; b < b1; ++b)
       for (std::size_t v = b * kBlock; v < std::min<std::size_t>(V, (b + 1) * kBlock); ++v) {
-        const Projection p = project(mesh, adj, normals, static_cast<int>(v), mark, ring, static_cast<int>(v));
+        const Projection p = project(mesh, adj, normals, static_cast<int>(v), mark, ring, static_cast<int>(v), 2);
         // The residual of a least-squares fit at a point it includes has variance σ²(1 − h).
         if (p.ok && p.leverage < 0.95) scaled[v] = std::abs(p.residual) / std::sqrt(1.0 - p.leverage);
       }
@@ -137,7 +122,7 @@ NoiseEstimate estimate_noise(const Mesh& mesh) {
   return out;
 }
 
-Mesh smooth_surface(const Mesh& mesh, int passes) {
+Mesh smooth_surface(const Mesh& mesh, int passes, int rings) {
   Mesh out = mesh;
   const int V = mesh.vertex_count();
   const Adjacency adj = one_rings(mesh);
@@ -150,7 +135,7 @@ Mesh smooth_surface(const Mesh& mesh, int passes) {
       std::vector<int> mark(static_cast<std::size_t>(V), -1), ring;
       for (std::size_t b = b0; b < b1; ++b)
         for (std::size_t v = b * kBlock; v < std::min<std::size_t>(V, (b + 1) * kBlock); ++v) {
-          const Projection p = project(out, adj, normals, static_cast<int>(v), mark, ring, static_cast<int>(v));
+          const Projection p = project(out, adj, normals, static_cast<int>(v), mark, ring, static_cast<int>(v), rings);
           if (p.ok) moved.row(static_cast<Eigen::Index>(v)) -= p.residual * normals.row(static_cast<Eigen::Index>(v));
         }
     }, 1);

@@ -24,6 +24,6 @@ NoiseEstimate estimate_noise(const Mesh& mesh);
 // Φ with every vertex moved along its normal onto the quadric fitted to its 2-ring, `passes`
 // times: a local least-squares (MLS) projection, unbiased for curvature up to second order,
 // that divides Gaussian noise by about the square root of the neighbours' count per pass.
-Mesh smooth_surface(const Mesh& mesh, int passes = 2);
+Mesh smooth_surface(const Mesh& mesh, int passes = 2, int rings = 2);
 
 }  // namespace flank

@@ -155,7 +155,7 @@ FitPatchResult fit_and_trim(const SurfaceIndex& index, const Motion& init,
       return out;
     }
     const ErrorGrid grid = sample_errors(index, out.fit.motion, out.fit.cutter, fo.samples_t,
-                                         fo.samples_s);
+                                         fo.samples_s, options.untrusted_edges);
     std::vector<TrimRange> pieces;
     if (out.rounds == 0 && options.keep_pieces)
       pieces = find_pieces(grid, options.tolerance, options.pieces);

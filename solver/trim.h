@@ -51,6 +51,7 @@ struct FitPatchOptions {
   PieceOptions pieces;
   // Also return the other pieces of the first trim (as restricted, not yet refitted starts).
   bool keep_pieces = false;
+  bool untrusted_edges = false;  // the index is a smoothed scan (see sample_errors)
 
   std::string validate() const;
 };

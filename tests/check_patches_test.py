@@ -453,6 +453,21 @@ class FlatStrips(unittest.TestCase):
                 # Still within tolerance: coverage as on the exact plane.
                 self.assertAlmostEqual(res["coverage"], (Y1 - Y0) / Y, places=12)
 
+    def test_a_peak_between_samples_is_seen_from_the_vertex(self):
+        # One vertex under the strip raised by 1.5 tol toward the tool, at a point no row or
+        # column of Omega passes over: the grid sees less than the peak, the vertex sees it
+        # all, and as a gouge. The result must not depend on the grid.
+        V, F = plane(0, X, 0, Y, NX, NY)
+        k = int(np.argmin(np.linalg.norm(V[:, :2] - [X / 2 + 0.1, (Y0 + Y1) / 2 + 0.1], axis=1)))
+        V[k, 2] = 1.5 * TOL
+        for rows, cols in ((ROWS, COLS), (ROWS + 37, COLS + 11)):
+            with self.subTest(rows=rows), tempfile.TemporaryDirectory() as tmp:
+                res = run_check(write_case(tmp, V, F, [strip_patch(0, Y0, Y1)]), rows=rows, cols=cols)
+                r = res["patches"][0]
+                self.assertAlmostEqual(r["max_abs"], 1.5 * TOL, delta=1e-9)
+                self.assertAlmostEqual(r["max_gouge"], 1.5 * TOL, delta=1e-9)
+                self.assertAlmostEqual(r["max_abs_vertices"], 1.5 * TOL, delta=1e-9)
+
     def test_beyond_tolerance_covers_nothing(self):
         with tempfile.TemporaryDirectory() as tmp:
             V, F = plane(0, X, 0, Y, NX, NY, z=-3 * TOL)
