@@ -66,6 +66,7 @@ int run_decompose(const DecomposeArgs& a) {
   o.tolerance = resolve_tolerance(a.tolerance, a.tolerance_rel, diagonal);
   progress.stage("indexed; tolerance " + std::to_string(o.tolerance) + " mm");
 
+  // Diagnostics for developers: every candidate line, grown piece and round on stderr.
   if (std::getenv("FLANK_TRACE_DECOMPOSE")) o.trace = [](const std::string& s) { std::fprintf(stderr, "%s\n", s.c_str()); };
   const DecomposeResult r = decompose(index, o, [&](const std::string& s) { progress.stage(s); });
   const double total = progress.elapsed();
@@ -90,6 +91,8 @@ int run_decompose(const DecomposeArgs& a) {
                                                               double(o.radii), double(o.directions_kept),
                                                               double(o.lengths)}},
                   {"control_points", static_cast<long long>(o.control_points)},
+                  {"noise_sigma", r.noise.sigma},
+                  {"smoothed", r.smoothed},
                   {"flip", a.flip}};
   if (o.holder) run.settings.push_back({"holder", std::vector<double>{o.holder_length, o.holder_radius}});
   run.tolerance = o.tolerance;
@@ -106,18 +109,26 @@ int run_decompose(const DecomposeArgs& a) {
   std::printf("%s: %zu patch%s cover %.2f%% of %.4g mm^2 within %.3g mm\n", a.mesh.c_str(),
               r.patches.size(), r.patches.size() == 1 ? "" : "es", 100.0 * r.coverage, r.total_area,
               o.tolerance);
+  if (r.smoothed)
+    std::printf("  the surface is noisy (scatter %.3g mm, %.0f%% of the tolerance): fitted on a smoothed copy; "
+                "errors and coverage are against the surface as given\n",
+                r.noise.sigma, 100.0 * r.noise.sigma / o.tolerance);
   double worst = 0.0;
   for (const Patch& p : r.patches) {
     worst = std::max(worst, p.error.max);
-    std::printf("  patch %d: %-8s L %.2f mm, sphere radii %.3f..%.3f mm, covers %.2f%%, max |e| %.2e mm%s\n",
-                p.id, std::string(to_string(p.cutter.kind)).c_str(), p.cutter.length,
-                p.cutter.radius(0), p.cutter.radius(1), 100.0 * p.coverage_fraction, p.error.max,
+    std::printf("  patch %d: %-8s cutter, L %.2f mm, sphere radii %.3f..%.3f mm, covers %.2f%% (adds %.2f%%), "
+                "max |e| %.2e mm, max gouge %.2e mm%s\n",
+                p.id, std::string(to_string(p.cutter.kind)).c_str(), p.cutter.length, p.cutter.radius(0),
+                p.cutter.radius(1), 100.0 * p.coverage_fraction,
+                100.0 * (r.coverage_curve[static_cast<std::size_t>(p.id)] -
+                         (p.id > 0 ? r.coverage_curve[static_cast<std::size_t>(p.id) - 1] : 0.0)),
+                p.error.max, p.error.max_gouge,
                 p.collision.checked ? (p.collision.holder_clear ? ", holder clear" : ", HOLDER COLLIDES") : "");
   }
   if (r.patches.empty())
     std::printf("  no patch meets the tolerance with the allowed cutters: try a larger --tolerance, "
                 "other --tool kinds or wider --radius/--length ranges\n");
-  std::printf("worst error %.3e mm; uncovered %.4g mm^2 in %zu region%s", worst,
+  std::printf("worst error %.3e mm; left for ball-end finishing: %.4g mm^2 in %zu region%s", worst,
               r.total_area - r.covered_area, r.uncovered.size(), r.uncovered.size() == 1 ? "" : "s");
   for (std::size_t k = 0; k < std::min<std::size_t>(3, r.uncovered.size()); ++k)
     std::printf("%s %.3g mm^2 at (%.1f, %.1f, %.1f)", k ? "," : ":", r.uncovered[k].area,
@@ -127,7 +138,7 @@ int run_decompose(const DecomposeArgs& a) {
   for (double c : r.coverage_curve) std::printf(" %.1f%%", 100.0 * c);
   std::printf("\n");
   std::printf("time: index %.2fs, seeds %.2fs, candidates %.2fs (%lld lines scored, %d laid out), fit %.2fs (%d grown), "
-              "cover %.2fs, refit %.2fs, total %.2fs\n",
+              "cover %.2fs, finish %.2fs, total %.2fs\n",
               index_s, r.times.seeds, r.times.candidates, r.lines_scored, r.candidates, r.times.fit, r.grown,
               r.times.cover, r.times.finish, total);
   std::printf("results in %s: patches.json envelopes.ply design.ply toolpath.apt\n", a.out_dir.c_str());
@@ -142,9 +153,12 @@ void register_decompose(CLI::App& app, int* exit_code) {
   auto a = std::make_shared<DecomposeArgs>();
   add_patch_options(cmd, *a);
   cmd->add_option("--tool", a->tools,
-                  "Cutter shapes allowed, comma-separated: cylinder, cone, barrel, spline (default cone)");
-  cmd->add_option("--radius", a->radius, "Allowed cutter radii MIN,MAX in mm (default 1%..10% of the diagonal)");
-  cmd->add_option("--length", a->length, "Allowed cutter lengths MIN,MAX in mm (default 10%..45% of the diagonal)");
+                  "Cutter shapes allowed, comma-separated: cylinder, cone, barrel, spline (default: every "
+                  "kind; each patch gets the simplest that cuts its surface)");
+  cmd->add_option("--radius", a->radius,
+                  "Allowed sphere radii of the cutter MIN,MAX in mm (default 1%..10% of the diagonal)");
+  cmd->add_option("--length", a->length,
+                  "Allowed cutter lengths MIN,MAX in mm (default 3%..45% of the diagonal)");
   cmd->add_option("--coverage", a->coverage, "Stop when this fraction of the area is covered (default 0.95)")
       ->check(CLI::Range(0.01, 1.0));
   cmd->add_option("--max-patches", a->max_patches, "At most this many patches (default 20)")->check(CLI::Range(1, 10000));

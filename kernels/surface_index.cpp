@@ -394,6 +394,7 @@ ClosestPoint SurfaceIndex::Impl::query_once(const Vec3& p, int hint_face) const 
     on_boundary = vertex_boundary[static_cast<std::size_t>(mesh.F(f, region - 4))] != 0;
   // Beyond the edge, not above it: g leaves the normal direction.
   out.boundary = on_boundary && std::abs(out.direction.dot(normal)) < 1.0 - 1e-9;
+  out.on_boundary = on_boundary;
   return out;
 }
 

@@ -20,6 +20,8 @@ struct ClosestPoint {
   // The footpoint lies on a boundary edge or vertex of Φ and p is beyond it (g is not the
   // face normal): the query point has left the surface.
   bool boundary = false;
+  // The footpoint lies on a boundary edge or vertex of Φ, beyond it or not.
+  bool on_boundary = false;
 };
 
 class SurfaceIndex {

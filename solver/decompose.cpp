@@ -308,7 +308,7 @@ DecomposeResult decompose(const SurfaceIndex& index, const DecomposeOptions& o, 
   out.coverage = final_cover.fraction();
   out.coverage_curve = final_cover.curve;
   out.uncovered = uncovered_regions(mesh, out.vertex_patch, area);
-  say("refitted " + std::to_string(out.patches.size()) + " patches: " + std::to_string(100.0 * out.coverage) + "% covered");
+  say(std::to_string(out.patches.size()) + " patches finished: " + std::to_string(100.0 * out.coverage) + "% covered");
   return out;
 }
 

@@ -215,6 +215,9 @@ GridStats stats(const ErrorGrid& grid) {
   st.rms = count ? std::sqrt(sum_sq / count) : 0.0;
   return st;
 }
+// cos 30°: how nearly along Φ's normal Ω's nearest point must lie for a vertex to be under Ω.
+constexpr double kUnderCosine = 0.8660254037844386;
+
 // Φ's vertices inside the bounding box of Ω's faces grown by `margin` (the only ones within
 // `margin` of Ω).
 std::vector<int> vertices_near(const Mesh& phi, const Mesh& omega, double margin) {
@@ -271,11 +274,15 @@ Patch evaluate_patch(const SurfaceIndex& index, const Motion& motion, const Cutt
       const Points normals = vertex_normals(phi);
       for (std::size_t k = 0; k < near.size(); ++k) {
         const ClosestPoint& f = cp[k];
-        if (f.face < 0 || f.boundary || f.distance > band) continue;
+        // At Ω's edges (the ends of the sweep and of the cutter) a vertex of Φ is not under Ω.
+        if (f.face < 0 || f.on_boundary || f.distance > band) continue;
+        // Under Ω: Ω's nearest point lies along Φ's normal (within 30°), not off to the side,
+        // as it does for a vertex beyond the end of a sweep whose last rows bend.
+        const double along =
+            (f.point - Vec3(phi.V.row(near[k]).transpose())).dot(Vec3(normals.row(near[k]).transpose()));
+        if (std::abs(along) < kUnderCosine * f.distance) continue;
         // Ω above Φ (on the tool side): material left; below: gouge.
-        const double e = (f.point - Vec3(phi.V.row(near[k]).transpose())).dot(Vec3(normals.row(near[k]).transpose())) >= 0
-                             ? f.distance
-                             : -f.distance;
+        const double e = along >= 0 ? f.distance : -f.distance;
         patch.error.max = std::max(patch.error.max, std::abs(e));
         patch.error.max_gouge = std::max(patch.error.max_gouge, -e);
       }

@@ -83,9 +83,10 @@ struct EvaluateOptions {
   // carries that vertex's noise, and a vertex within tolerance would count as uncovered
   // because a noisy neighbour is not. tests/check_patches.py applies the same rule.
   double omega_band = 2.0;
-  // The reported errors also count Φ's vertices within this many tolerances of Ω whose nearest
-  // point on Ω is inside it (their signed distance to Ω), Ω taken where it lies over Φ: on a
-  // scan the largest deviation sits at the vertices, between Ω's samples.
+  // The reported errors also count Φ's vertices under Ω: within this many tolerances of it,
+  // their nearest point on Ω inside it (not on its edge) and within 30° of Φ's normal (their
+  // signed distance to Ω; Ω taken where it lies over Φ). On a scan the largest deviation sits
+  // at the vertices, between Ω's samples.
   double vertex_band = 10.0;
   // The surface evaluated against is a smoothed scan: see sample_errors.
   bool untrusted_edges = false;

@@ -39,7 +39,10 @@ Definitions (the contract; derived here from first principles, not from the C++)
 * The reported deviations also count Phi's vertices seen from Omega: every vertex of Phi
   within 10 x tolerance of a patch's Omega mesh, taken over the cells whose four corners
   have a counted footpoint (as the grid's errors), whose closest point on it is not beyond
-  that mesh's boundary contributes its signed distance (+ where Omega lies on the tool side of
+  that mesh's boundary (nor on it: at the ends of the sweep and of the cutter a vertex is
+  not under Omega), and whose segment to that point lies within 30 degrees of Phi's vertex
+  normal (a vertex beyond the end of a sweep sees Omega's last rows off to the side),
+  contributes its signed distance (+ where Omega lies on the tool side of
   the vertex, by the area-weighted vertex normal: material left) to max_abs and max_gouge
   (not to rms).  On a scanned (noisy) Phi the largest deviation sits at the vertices, between
   any samples of Omega, so the grid alone would make max_abs depend on the sampling.
@@ -711,6 +714,16 @@ class TriMesh:
         r[sel] = np.where((r[sel] == 0) | (new >= 4), new, r[sel])
         return r
 
+    def on_boundary(self, q):
+        """True where the footpoint lies on a boundary edge or vertex (beyond it or not)."""
+        f, r = q["face"], q["region"].astype(np.int64)
+        out = np.zeros(len(f), dtype=bool)
+        e = (r >= 1) & (r <= 3)
+        out[e] = self.boundary_edge[f[e], r[e] - 1]
+        vv = r >= 4
+        out[vv] = self.boundary_vertex[self.F[f[vv], r[vv] - 4]]
+        return out
+
     def beyond_boundary(self, P, q, eps):
         """True where the footpoint is on a boundary edge/vertex and P lies beyond it."""
         f, r = q["face"], q["region"].astype(np.int64)
@@ -1151,8 +1164,9 @@ def check(patches_json_path, mesh_path=None, rows=400, cols=101):
                else np.zeros(0, dtype=np.int64))
         if sel.size:
             qs = {key: v[sel] for key, v in qv_c.items()}
-            inside_v = ~omc.beyond_boundary(X[sel], qs, eps)
-            ev = np.sign(np.sum((qs["foot"] - X[sel]) * vnormal[qverts[sel]], axis=1)) * qs["dist"]
+            along = np.sum((qs["foot"] - X[sel]) * vnormal[qverts[sel]], axis=1)
+            inside_v = ~omc.on_boundary(qs) & (np.abs(along) >= math.cos(math.radians(30.0)) * qs["dist"])
+            ev = np.sign(along) * qs["dist"]
             ev = np.where(ev == 0.0, qs["dist"], ev)[inside_v]
             if ev.size:
                 r_ = results[i]
