@@ -54,6 +54,12 @@ bool acceptable(const Movability& m, const CandidateLineOptions& o, double L) {
          m.radius_max <= 1.1 * o.radius_max;
 }
 
+// The length of a line laid across a free run: the run with the overhang past both ends,
+// within the allowed lengths.
+double laid_length(const FreeRun& run, const CandidateLineOptions& o) {
+  return std::clamp((run.low + run.high) * (1.0 + 2.0 * o.overhang), o.length_min, o.length_max);
+}
+
 struct Scored {
   Line line;
   Movability movability;
@@ -182,7 +188,7 @@ std::vector<LineCandidate> seed_candidates(const SurfaceIndex& index, const Seed
     a.u = (c.line.b - c.line.a).normalized();
     const Vec3 mid0 = 0.5 * (c.line.a + c.line.b);
     const FreeRun run0 = free_run(index, mid0, a.u, o.length_max, covered);
-    a.L0 = std::clamp((run0.low + run0.high) * (1.0 + 2.0 * o.overhang), o.length_min, o.length_max);
+    a.L0 = laid_length(run0, o);
     const Line laid = lay_line(mid0, a.u, a.L0, run0, o.overhang);
     const Vec3 centre = 0.5 * (laid.a + laid.b);
     const Vec3 w1 = seed.normal.cross(a.u).normalized(), w2 = a.u.cross(w1);
@@ -255,12 +261,23 @@ std::vector<LineCandidate> seed_candidates(const SurfaceIndex& index, const Seed
       if (!refined.movability.ok()) continue;
       const Vec3 axis = (refined.line.b - refined.line.a).normalized();
       const Vec3 mid = 0.5 * (refined.line.a + refined.line.b);
+      // The lengths: across the free part of Φ, then halved; and, once part of Φ is covered,
+      // also across Φ regardless of it: a long sweep over covered area may replace several
+      // short ones in the cover (greedy_cover's swaps), where gap-fillers alone cannot.
       const FreeRun run = free_run(index, mid, axis, o.length_max, covered);
-      double L = std::clamp((run.low + run.high) * (1.0 + 2.0 * o.overhang), o.length_min, o.length_max);
-      for (int k = 0; k < o.lengths; ++k, L *= 0.5) {
-        if (L < o.length_min * (1.0 - 1e-9)) break;
+      std::vector<std::pair<double, FreeRun>> laid;
+      if (!covered.empty()) {
+        const FreeRun whole = free_run(index, mid, axis, o.length_max, {});
+        if (whole.low + whole.high > 1.1 * (run.low + run.high)) laid.emplace_back(laid_length(whole, o), whole);
+      }
+      double len = laid_length(run, o);
+      for (int k = 0; k < o.lengths; ++k, len *= 0.5) {
+        if (len < o.length_min * (1.0 - 1e-9)) break;
+        laid.emplace_back(len, run);
+      }
+      for (const auto& [L, on] : laid) {
         LineCandidate lc;
-        lc.line = lay_line(mid, axis, L, run, o.overhang);
+        lc.line = lay_line(mid, axis, L, on, o.overhang);
         // The simplest allowed kind that follows the line's distances; the most general one
         // must at least fit them within line_misfit.
         bool found = false;

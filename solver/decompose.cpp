@@ -165,6 +165,7 @@ DecomposeResult decompose(const SurfaceIndex& index, const DecomposeOptions& o, 
   go.evaluate.cols = 2 * o.samples_s;
   go.evaluate.spacing = 2.0 * o.final_spacing * diagonal;
   go.evaluate.envelope = false;
+  go.evaluate.vertex_side = false;  // candidates compete on coverage; the chosen get the full report
   go.evaluate.holder = o.holder;
   go.evaluate.holder_length = o.holder_length;
   go.evaluate.holder_radius = o.holder_radius;
@@ -286,6 +287,7 @@ DecomposeResult decompose(const SurfaceIndex& index, const DecomposeOptions& o, 
   fo.evaluate.cols = o.final_cols;
   fo.evaluate.spacing = o.final_spacing * diagonal;
   fo.evaluate.envelope = true;
+  fo.evaluate.vertex_side = true;
   std::vector<std::optional<Patch>> finished(cover.picks.size());
   parallel_invoke_each(cover.picks.size(), [&](std::size_t k) {
     finished[k] = finish_patch(work, pool[static_cast<std::size_t>(cover.picks[k])], fo);
@@ -293,10 +295,11 @@ DecomposeResult decompose(const SurfaceIndex& index, const DecomposeOptions& o, 
   std::vector<Patch> final_pool;
   for (std::optional<Patch>& p : finished)
     if (p) final_pool.push_back(std::move(*p));
-  Cover final_cover = empty_cover(area);
+  Cover kept = empty_cover(area);
   CoverOptions fco = co;
   fco.coverage_target = 1.0;  // keep every chosen patch that still adds enough
-  greedy_cover(final_pool, area, fco, &final_cover);
+  greedy_cover(final_pool, area, fco, &kept);
+  const Cover final_cover = order_cover(final_pool, area, kept.picks);
   for (std::size_t k = 0; k < final_cover.picks.size(); ++k) {
     Patch p = std::move(final_pool[static_cast<std::size_t>(final_cover.picks[k])]);
     p.id = static_cast<int>(k);

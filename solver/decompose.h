@@ -54,9 +54,9 @@ struct DecomposeOptions {
 
   // Growth: candidates grown per round, concurrently in batches of a fixed size (so that the
   // result does not depend on the thread count). The fit's samples and control points.
-  int grow_per_round = 8;
+  int grow_per_round = 16;
   int batch = 8;
-  int control_points = 16, samples_t = 48, samples_s = 16, iterations = 15;
+  int control_points = 16, samples_t = 48, samples_s = 16, iterations = 10;
   // Step extensions per accepted Gauss–Newton step (FitOptions::max_extrapolations): each
   // costs a pass of closest points, and a candidate needs the patch's extent, not the last
   // digit of its cutter radius.

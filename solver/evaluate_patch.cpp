@@ -121,10 +121,10 @@ std::vector<SampleClass> classify_samples(const ErrorGrid& grid, double toleranc
   std::vector<SampleClass> out(static_cast<std::size_t>(grid.rows) * grid.cols, SampleClass::overhang);
   for (std::size_t k = 0; k < out.size(); ++k) {
     const auto e = static_cast<Eigen::Index>(k);
-    if (!grid.untrusted.empty() && grid.untrusted[k])
-      out[k] = SampleClass::overhang;
-    else if (!grid.sweeps.empty() && !grid.sweeps[k / static_cast<std::size_t>(grid.cols)])
+    if (!grid.sweeps.empty() && !grid.sweeps[k / static_cast<std::size_t>(grid.cols)])
       out[k] = SampleClass::outside;  // the motion stalls or turns back: Ω folds
+    else if (!grid.untrusted.empty() && grid.untrusted[k])
+      out[k] = SampleClass::overhang;
     else if (grid.sphere_error(e) < -tolerance)
       out[k] = SampleClass::outside;  // the whole cutter: a sphere reaching into Φ gouges
     else if (grid.omega_interior[k])
@@ -239,12 +239,15 @@ std::vector<int> vertices_near(const Mesh& phi, const Mesh& omega, double margin
 }  // namespace
 
 Patch evaluate_patch(const SurfaceIndex& index, const Motion& motion, const Cutter& cutter,
-                     const EvaluateOptions& options, const SurfaceIndex* given) {
+                     const EvaluateOptions& options, const SurfaceIndex* given, const ErrorGrid* known) {
   Patch patch;
   patch.motion = motion;
   patch.cutter = cutter;
   const auto [rows, cols] = evaluation_grid(motion, cutter, options);
-  const ErrorGrid grid = sample_errors(index, motion, cutter, rows, cols, options.untrusted_edges);
+  const bool reuse = known && known->rows == rows && known->cols == cols;
+  ErrorGrid sampled;
+  if (!reuse) sampled = sample_errors(index, motion, cutter, rows, cols, options.untrusted_edges);
+  const ErrorGrid& grid = reuse ? *known : sampled;
   const GridStats judged = stats(grid);
   ErrorGrid given_grid;
   if (given) given_grid = sample_errors(*given, motion, cutter, rows, cols);
@@ -259,7 +262,7 @@ Patch evaluate_patch(const SurfaceIndex& index, const Motion& motion, const Cutt
   // The deviation seen from Φ's vertices under Ω as well: samples of Ω fall between the peaks
   // of a scanned Φ (its noise sits at the vertices), so its largest deviation depends on the
   // sampling; at the vertices it does not. tests/check_patches.py measures the same union.
-  {
+  if (options.vertex_side) {
     // Over the part of Ω whose points lie over Φ, as the grid's errors.
     const Mesh omega = envelope_mesh(reported, &reported.omega_interior);
     const SurfaceIndex* phi_index = given ? given : &index;

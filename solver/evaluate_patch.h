@@ -88,6 +88,7 @@ struct EvaluateOptions {
   // signed distance to Ω; Ω taken where it lies over Φ). On a scan the largest deviation sits
   // at the vertices, between Ω's samples.
   double vertex_band = 10.0;
+  bool vertex_side = true;  // false: grid samples only (cheaper, for screening candidates)
   // The surface evaluated against is a smoothed scan: see sample_errors.
   bool untrusted_edges = false;
 
@@ -98,8 +99,11 @@ struct EvaluateOptions {
 // a smoothed copy of it (same vertices and faces): the trim decisions, the good parts of Ω and
 // judged_gouge then come from `index`, while the reported errors and the coverage (Φ's vertices
 // within tolerance of Ω) are measured against `given`.
+// `grid` (optional): the grid of this motion and cutter on `index` at evaluation_grid's size,
+// when the caller has it already.
 Patch evaluate_patch(const SurfaceIndex& index, const Motion& motion, const Cutter& cutter,
-                     const EvaluateOptions& options, const SurfaceIndex* given = nullptr);
+                     const EvaluateOptions& options, const SurfaceIndex* given = nullptr,
+                     const ErrorGrid* grid = nullptr);
 
 // The rows and columns evaluate_patch samples (see EvaluateOptions::spacing).
 std::pair<int, int> evaluation_grid(const Motion& motion, const Cutter& cutter, const EvaluateOptions& options);

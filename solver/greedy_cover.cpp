@@ -74,22 +74,79 @@ void improve_cover(const std::vector<Patch>& pool, const VecX& area, int max_swa
     picked[static_cast<std::size_t>(best_in)] = 1;
     picks[static_cast<std::size_t>(best_out)] = best_in;
   }
-  // Rebuild in greedy order over the picks alone.
-  std::vector<Patch> chosen;
-  chosen.reserve(picks.size());
-  for (int k : picks) chosen.push_back(pool[static_cast<std::size_t>(k)]);
-  Cover rebuilt = empty_cover(area);
-  CoverOptions all;
-  all.coverage_target = 1.0;
-  all.max_patches = static_cast<int>(picks.size());
-  all.min_gain = 0.0;
-  greedy_cover(chosen, area, all, &rebuilt);
-  rebuilt.used.assign(pool.size(), 0);
-  for (int& k : rebuilt.picks) {
-    k = picks[static_cast<std::size_t>(k)];
-    rebuilt.used[static_cast<std::size_t>(k)] = 1;
+  *c = order_cover(pool, area, picks);
+}
+
+namespace {
+// The cover of `order` (pool indices) taken in that order.
+Cover cover_in_order(const std::vector<Patch>& pool, const VecX& area, const std::vector<int>& order) {
+  Cover c = empty_cover(area);
+  c.used.assign(pool.size(), 0);
+  for (int k : order) {
+    const int id = static_cast<int>(c.picks.size());
+    for (int v : pool[static_cast<std::size_t>(k)].covered_vertices)
+      if (c.vertex_patch[static_cast<std::size_t>(v)] < 0)
+        c.vertex_patch[static_cast<std::size_t>(v)] = id, c.covered_area += area(v);
+    c.used[static_cast<std::size_t>(k)] = 1;
+    c.picks.push_back(k);
+    c.curve.push_back(c.fraction());
   }
-  *c = std::move(rebuilt);
+  return c;
+}
+}  // namespace
+
+Cover order_cover(const std::vector<Patch>& pool, const VecX& area, std::vector<int> picks) {
+  std::sort(picks.begin(), picks.end());
+  // Greedy: largest gain first, ties to the lower pool index.
+  std::vector<int> greedy;
+  {
+    std::vector<char> covered(static_cast<std::size_t>(area.size()), 0), taken(picks.size(), 0);
+    for (std::size_t step = 0; step < picks.size(); ++step) {
+      int best = -1;
+      double best_gain = -1.0;
+      for (std::size_t i = 0; i < picks.size(); ++i) {
+        if (taken[i]) continue;
+        const Patch& p = pool[static_cast<std::size_t>(picks[i])];
+        double gain = 0.0;
+        for (int v : p.covered_vertices)
+          if (!covered[static_cast<std::size_t>(v)]) gain += area(v);
+        const bool better = best < 0 || gain > best_gain ||
+                            (gain == best_gain && p.error.max < pool[static_cast<std::size_t>(picks[best])].error.max);
+        if (better) best = static_cast<int>(i), best_gain = gain;
+      }
+      taken[static_cast<std::size_t>(best)] = 1;
+      greedy.push_back(picks[static_cast<std::size_t>(best)]);
+      for (int v : pool[static_cast<std::size_t>(greedy.back())].covered_vertices) covered[static_cast<std::size_t>(v)] = 1;
+    }
+  }
+  // Backward elimination: drop the pick that loses the least area, ties the higher pool index.
+  std::vector<int> eliminated;
+  {
+    std::vector<int> count(static_cast<std::size_t>(area.size()), 0);
+    for (int k : picks)
+      for (int v : pool[static_cast<std::size_t>(k)].covered_vertices) ++count[static_cast<std::size_t>(v)];
+    std::vector<char> gone(picks.size(), 0);
+    for (std::size_t step = 0; step < picks.size(); ++step) {
+      int worst = -1;
+      double worst_loss = 0.0;
+      for (std::size_t i = picks.size(); i-- > 0;) {
+        if (gone[i]) continue;
+        double loss = 0.0;
+        for (int v : pool[static_cast<std::size_t>(picks[i])].covered_vertices)
+          if (count[static_cast<std::size_t>(v)] == 1) loss += area(v);
+        if (worst < 0 || loss < worst_loss) worst = static_cast<int>(i), worst_loss = loss;
+      }
+      gone[static_cast<std::size_t>(worst)] = 1;
+      eliminated.push_back(picks[static_cast<std::size_t>(worst)]);
+      for (int v : pool[static_cast<std::size_t>(eliminated.back())].covered_vertices) --count[static_cast<std::size_t>(v)];
+    }
+    std::reverse(eliminated.begin(), eliminated.end());
+  }
+  Cover a = cover_in_order(pool, area, greedy), b = cover_in_order(pool, area, eliminated);
+  double sa = 0.0, sb = 0.0;
+  for (double x : a.curve) sa += x;
+  for (double x : b.curve) sb += x;
+  return sb > sa * (1.0 + 1e-12) ? b : a;
 }
 
 std::vector<UncoveredRegion> uncovered_regions(const Mesh& mesh, const std::vector<int>& vertex_patch,

@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <cmath>
 #include <cstdio>
+#include <optional>
 
 namespace flank {
 
@@ -38,6 +39,7 @@ FitPatchOptions trim_options(const GrowOptions& o, double length) {
   fo.fit.length = length;
   fo.tolerance = o.thresholds.tolerance;
   fo.max_rounds = o.trim_rounds;
+  fo.refit_below = o.refit_below;
   fo.pieces = o.pieces;
   fo.untrusted_edges = o.given != nullptr;
   if (length > 0 && o.length_min > 0)
@@ -142,9 +144,10 @@ std::optional<Patch> finish_patch(const SurfaceIndex& index, const Patch& patch,
   // A cut motion is a new spline, sampled anew: repeat until its grid holds nothing out of
   // tolerance (a few rounds at most; what still fails is no patch).
   constexpr int kFineTrims = 4;
+  ErrorGrid grid;
   for (int round = 0;; ++round) {
     const auto [rows, cols] = evaluation_grid(motion, cutter, eo);
-    const ErrorGrid grid = sample_errors(index, motion, cutter, rows, cols, eo.untrusted_edges);
+    grid = sample_errors(index, motion, cutter, rows, cols, eo.untrusted_edges);
     PieceOptions po = g.pieces;
     if (cutter.length > 0 && g.length_min > 0)
       po.min_cols = std::max(po.min_cols, static_cast<int>(std::ceil((cols - 1) * g.length_min / cutter.length)) + 1);
@@ -156,7 +159,7 @@ std::optional<Patch> finish_patch(const SurfaceIndex& index, const Patch& patch,
     motion = cut.motion;
     cutter = cut.cutter;
   }
-  Patch p = evaluate_patch(index, motion, cutter, eo, g.given);
+  Patch p = evaluate_patch(index, motion, cutter, eo, g.given, &grid);
   if (!reject_reason(p, g).empty()) return std::nullopt;
   return p;
 }

@@ -24,6 +24,7 @@ namespace flank {
 struct GrowOptions {
   FitOptions fit;               // kind, control points, samples, iterations, radius range
   int trim_rounds = 1;          // trim + refit rounds
+  double refit_below = 0.8;     // a trim keeping more of the grid is cut without refit
   PieceOptions pieces;
   double length_min = 0.0;      // a piece whose cutter is shorter is no real tool (absolute)
   EvaluateOptions evaluate;     // grid, holder; coverage is always measured

@@ -81,8 +81,14 @@ TrimRange best_rectangle(const std::vector<SampleClass>& cls, int rows, int cols
         rw0 = std::min(rw0, i), rw1 = std::max(rw1, i);
         cw0 = std::min(cw0, j), cw1 = std::max(cw1, j);
       }
+  const TrimRange grown = best;
   best.row0 = std::max(best.row0, rw0 - 1), best.row1 = std::min(best.row1, rw1 + 1);
   best.col0 = std::max(best.col0, cw0 - 1), best.col1 = std::min(best.col1, cw1 + 1);
+  // Never below the minimum size: give back overhang on the side that has it.
+  while (best.rows() < o.min_rows)
+    (best.row1 < grown.row1 ? ++best.row1 : --best.row0);
+  while (best.cols() < o.min_cols)
+    (best.col1 < grown.col1 ? ++best.col1 : --best.col0);
   return best;
 }
 
@@ -175,8 +181,10 @@ FitPatchResult fit_and_trim(const SurfaceIndex& index, const Motion& init,
       return out;
     }
     const PieceStart next = restrict_to(out.fit.motion, out.fit.cutter, range, grid, fo.radius_min, fo.radius_max);
-    if (out.rounds >= options.max_rounds) {
-      // The last round may still hold samples out of tolerance: cut them without a refit.
+    // A cut that keeps most of the sweep and of the cutter changes the fit little: cut without
+    // refitting. The last round may still hold samples out of tolerance: cut them likewise.
+    const double kept = static_cast<double>(range.rows()) * range.cols() / (static_cast<double>(grid.rows) * grid.cols);
+    if (out.rounds >= options.max_rounds || kept >= options.refit_below) {
       out.status = FitPatchStatus::ok;
       out.fit.motion = next.motion;
       out.fit.cutter = next.cutter;

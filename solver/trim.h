@@ -35,8 +35,11 @@ struct PieceOptions {
 
 // The rectangle holding the most samples within tolerance and none out of it (samples beyond
 // Φ's edge are allowed and count nothing: the cutter may overhang the part). Ties keep the
-// first in (row, column) order. Empty when no rectangle of min_rows × min_cols holds a sample
-// within tolerance.
+// first found: the lowest first column, then the lowest last column, then the lowest first
+// row. It then grows by the rows and columns beside it that hold nothing out of tolerance and
+// shrinks to those holding samples within tolerance plus one of pure overhang past each end,
+// never below min_rows × min_cols. Empty when no rectangle of that size holds a sample within
+// tolerance.
 TrimRange find_trim(const ErrorGrid& grid, double tolerance, const PieceOptions& options = {});
 
 // The best rectangle, then recursively the best ones in the rows before and after it: the
@@ -48,6 +51,9 @@ struct FitPatchOptions {
   FitOptions fit;
   double tolerance = 0.0;  // absolute
   int max_rounds = 3;      // refits after trimming
+  // A trim that keeps at least this fraction of the grid is cut without a refit (1: always
+  // refit): a refit of nearly the same range changes nearly nothing and costs a whole fit.
+  double refit_below = 1.0;
   PieceOptions pieces;
   // Also return the other pieces of the first trim (as restricted, not yet refitted starts).
   bool keep_pieces = false;
