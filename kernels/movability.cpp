@@ -138,6 +138,15 @@ Movability movability(const SurfaceIndex& index, const Vec3& a, const Vec3& b,
       out.max_slope = std::max(out.max_slope, std::abs(out.cutter.slope(sk)));
     }
     out.profile_rms = ss.empty() ? 0.0 : std::sqrt(sq / static_cast<double>(ss.size()));
+    if (options.second_profile && !ss.empty()) {
+      const Cutter second = Cutter::fit(*options.second_profile, (b - a).norm(), ss, dd);
+      double sq2 = 0.0;
+      for (std::size_t k = 0; k < ss.size(); ++k) {
+        const double r = second.radius(ss[k]) - dd[k];
+        sq2 += r * r;
+      }
+      out.second_profile_rms = std::sqrt(sq2 / static_cast<double>(ss.size()));
+    }
   }
   if (boundary > options.max_boundary_fraction * n)
     out.status = MovabilityStatus::left_surface;

@@ -28,6 +28,8 @@ struct MovabilityOptions {
   // Also fit the footpoint distances with a cutter of this kind (the sphere radii the line
   // would need), reporting the misfit and the profile.
   std::optional<CutterKind> profile;
+  // And the misfit of a second kind, from the same footpoints (Movability::second_profile_rms).
+  std::optional<CutterKind> second_profile;
   // Eigen-directions of A_yy below this fraction of trace(A) are treated as free and set to
   // zero: 1e-9 keeps the exact answer on analytic data; propagation uses 1e-4 so that
   // sliding along a cylinder-like line (g·u is mesh noise there) is not amplified into motion.
@@ -51,6 +53,7 @@ struct Movability {
   // distances, their rms misfit, and the range of d and of |d′|.
   Cutter cutter;
   double profile_rms = 0.0;
+  double second_profile_rms = std::numeric_limits<double>::infinity();
   double radius_min = 0.0, radius_max = 0.0, max_slope = 0.0;
 
   bool ok() const { return status == MovabilityStatus::ok; }

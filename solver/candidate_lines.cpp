@@ -5,6 +5,7 @@
 #include <cstdio>
 #include <limits>
 #include <numbers>
+#include <numeric>
 
 namespace flank {
 
@@ -63,7 +64,8 @@ double laid_length(const FreeRun& run, const CandidateLineOptions& o) {
 struct Scored {
   Line line;
   Movability movability;
-  double score = std::numeric_limits<double>::infinity();
+  double score = std::numeric_limits<double>::infinity();         // with the first steering profile
+  double second_score = std::numeric_limits<double>::infinity();  // with the second
 };
 
 }  // namespace
@@ -132,11 +134,14 @@ std::vector<LineCandidate> seed_candidates(const SurfaceIndex& index, const Seed
   for (CutterKind k : o.kinds)
     if (k == CutterKind::barrel) steer.push_back(k);
   if (steer.empty() || steer.front() != general) steer.push_back(general);
-  // Directions are scored with the most general profile: which direction sweeps should not
-  // depend on a profile the search has not yet chosen.
+  // Directions are scored with both steering profiles, and the best of each go on: a free-form
+  // profile fits the distances of almost any short line, so its score is the movability alone,
+  // and on an exact cone envelope lines 15–25° off the axis scored as well as the axis; the
+  // barrel alone ranks the axis of a free-form cutter's envelope low.
   MovabilityOptions coarse;
   coarse.samples = o.coarse_samples;
-  coarse.profile = general;
+  coarse.profile = steer.front();
+  if (steer.size() > 1) coarse.second_profile = steer.back();
   // A line through a seed near Φ's edge overhangs it: lay_line fits it to Φ later.
   coarse.max_boundary_fraction = 0.5;
   std::vector<Scored> all;
@@ -159,13 +164,37 @@ std::vector<LineCandidate> seed_candidates(const SurfaceIndex& index, const Seed
         ++*scored;
         if (!acceptable(c.movability, o, L_ref)) continue;
         c.score = line_score(c.movability, L_ref);
+        c.second_score = c.score;
+        if (coarse.second_profile) {
+          const double misfit = c.movability.second_profile_rms / L_ref;
+          c.second_score = c.movability.value + kProfileWeight * misfit * misfit;
+        }
         all.push_back(c);
       }
     }
-  auto by_score = [](const Scored& x, const Scored& y) { return x.score < y.score; };
-  // Stable: ties never depend on anything but generation order.
-  std::stable_sort(all.begin(), all.end(), by_score);
-  if (static_cast<int>(all.size()) > o.fine_candidates) all.resize(static_cast<std::size_t>(o.fine_candidates));
+  // The best by each steering profile's score, half each (stable: ties never depend on
+  // anything but generation order); a line among both counts once.
+  {
+    std::vector<std::size_t> order(all.size());
+    std::vector<Scored> best;
+    std::vector<char> taken(all.size(), 0);
+    const int per = coarse.second_profile ? (o.fine_candidates + 1) / 2 : o.fine_candidates;
+    for (int pass = 0; pass < (coarse.second_profile ? 2 : 1); ++pass) {
+      std::iota(order.begin(), order.end(), 0);
+      std::stable_sort(order.begin(), order.end(), [&](std::size_t x, std::size_t y) {
+        return pass == 0 ? all[x].score < all[y].score : all[x].second_score < all[y].second_score;
+      });
+      int added = 0;
+      for (std::size_t i : order) {
+        if (added == per || static_cast<int>(best.size()) == o.fine_candidates) break;
+        if (taken[i]) continue;
+        taken[i] = 1;
+        best.push_back(all[i]);
+        ++added;
+      }
+    }
+    all = std::move(best);
+  }
   MovabilityOptions fine = coarse;
   fine.samples = o.fine_samples;
 

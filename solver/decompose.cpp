@@ -166,6 +166,7 @@ DecomposeResult decompose(const SurfaceIndex& index, const DecomposeOptions& o, 
   go.evaluate.spacing = 2.0 * o.final_spacing * diagonal;
   go.evaluate.envelope = false;
   go.evaluate.vertex_side = false;  // candidates compete on coverage; the chosen get the full report
+  go.evaluate.refine_max = 0;
   go.evaluate.holder = o.holder;
   go.evaluate.holder_length = o.holder_length;
   go.evaluate.holder_radius = o.holder_radius;
@@ -288,6 +289,7 @@ DecomposeResult decompose(const SurfaceIndex& index, const DecomposeOptions& o, 
   fo.evaluate.spacing = o.final_spacing * diagonal;
   fo.evaluate.envelope = true;
   fo.evaluate.vertex_side = true;
+  fo.evaluate.refine_max = EvaluateOptions{}.refine_max;
   std::vector<std::optional<Patch>> finished(cover.picks.size());
   parallel_invoke_each(cover.picks.size(), [&](std::size_t k) {
     finished[k] = finish_patch(work, pool[static_cast<std::size_t>(cover.picks[k])], fo);

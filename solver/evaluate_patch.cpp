@@ -169,19 +169,19 @@ Mesh envelope_mesh(const ErrorGrid& grid, const std::vector<char>* keep) {
 std::pair<int, int> evaluation_grid(const Motion& motion, const Cutter& cutter, const EvaluateOptions& o) {
   int rows = o.rows, cols = o.cols;
   if (o.spacing > 0) {
-    // The longest path of an axis point along the motion (its ends or its middle).
-    double path = 0.0;
+    // Rows as if the axis moved everywhere as fast as at its fastest (its ends or its middle,
+    // over 64 chords, 2% to spare: a chord under-reads the fastest speed within it): uniform
+    // rows in t are then at most `spacing` apart everywhere.
+    double fastest = 0.0;
     for (double s : {0.0, 0.5, 1.0}) {
-      double p = 0.0;
       Vec3 prev = motion.point(0.0, s);
       for (int i = 1; i <= 64; ++i) {
         const Vec3 q = motion.point(i / 64.0, s);
-        p += (q - prev).norm();
+        fastest = std::max(fastest, (q - prev).norm());
         prev = q;
       }
-      path = std::max(path, p);
     }
-    rows = std::max(rows, static_cast<int>(std::ceil(path / o.spacing)) + 1);
+    rows = std::max(rows, static_cast<int>(std::ceil(1.02 * 64.0 * fastest / o.spacing)) + 1);
     cols = std::max(cols, static_cast<int>(std::ceil(cutter.length / o.spacing)) + 1);
     // Within the budget, the two counts shrink in proportion.
     const double excess = static_cast<double>(rows) * cols / std::max(1, o.max_samples);
@@ -215,6 +215,47 @@ GridStats stats(const ErrorGrid& grid) {
   st.rms = count ? std::sqrt(sum_sq / count) : 0.0;
   return st;
 }
+// Ω's signed deviation from Φ at (t, s), with Φ's side taken as at a nearby sample (`g`, the
+// unit direction from Φ toward the sphere centre there); NaN where Ω has no point over Φ.
+double omega_error_at(const SurfaceIndex& index, const Motion& motion, const Cutter& cutter, double t,
+                      double s, const Vec3& g, int hint) {
+  const Line l = motion.ruling(t);
+  const Vec3 centre = l.point(s), rs = l.b - l.a;
+  const Vec3 rt = (1 - s) * motion.a_at(t, 1) + s * motion.b_at(t, 1);
+  const EnvelopePoint ep = envelope_point(centre, rt, rs, cutter.radius(s), cutter.slope(s), envelope_side(rt, rs, -g));
+  if (!ep.valid) return std::numeric_limits<double>::quiet_NaN();
+  const ClosestPoint cp = index.closest_point(ep.point, hint);
+  if (cp.face < 0 || cp.boundary) return std::numeric_limits<double>::quiet_NaN();
+  return cp.signed_distance;
+}
+
+// The largest |e| (signed) on 5 × 5 sub-grids of quarter-sample steps around each of the
+// `count` samples of largest |e| (over Φ, on rows where the axis sweeps).
+double refined_max(const SurfaceIndex& index, const Motion& motion, const Cutter& cutter, const ErrorGrid& grid,
+                   int count) {
+  std::vector<std::pair<double, std::size_t>> top;
+  for (std::size_t k = 0; k < grid.omega_interior.size(); ++k)
+    if (grid.omega_interior[k] && (grid.sweeps.empty() || grid.sweeps[k / static_cast<std::size_t>(grid.cols)]))
+      top.emplace_back(std::abs(grid.error(static_cast<Eigen::Index>(k))), k);
+  const std::size_t n = std::min<std::size_t>(top.size(), static_cast<std::size_t>(count));
+  std::partial_sort(top.begin(), top.begin() + static_cast<std::ptrdiff_t>(n), top.end(),
+                    [](const auto& a, const auto& b) { return a.first > b.first || (a.first == b.first && a.second < b.second); });
+  double best = 0.0;
+  const double dt = 1.0 / (grid.rows - 1), ds = 1.0 / (grid.cols - 1);
+  for (std::size_t q = 0; q < n; ++q) {
+    const std::size_t k = top[q].second;
+    const int i = static_cast<int>(k / static_cast<std::size_t>(grid.cols)), j = static_cast<int>(k % static_cast<std::size_t>(grid.cols));
+    const Vec3 g = grid.directions.row(static_cast<Eigen::Index>(k)).transpose();
+    for (int a = -2; a <= 2; ++a)
+      for (int b = -2; b <= 2; ++b) {
+        const double t = std::clamp((i + 0.25 * a) * dt, 0.0, 1.0), s = std::clamp((j + 0.25 * b) * ds, 0.0, 1.0);
+        const double e = omega_error_at(index, motion, cutter, t, s, g, grid.faces[k]);
+        if (std::isfinite(e) && std::abs(e) > std::abs(best)) best = e;
+      }
+  }
+  return best;
+}
+
 // cos 30°: how nearly along Φ's normal Ω's nearest point must lie for a vertex to be under Ω.
 constexpr double kUnderCosine = 0.8660254037844386;
 
@@ -258,6 +299,16 @@ Patch evaluate_patch(const SurfaceIndex& index, const Motion& motion, const Cutt
   patch.error.max_gouge = st.max_gouge;
   patch.error.judged_gouge = judged.max_gouge;
   patch.error.max_relative = st.max_abs / (given ? given : &index)->diagonal();
+  if (options.refine_max > 0) {
+    // The largest deviations are where the grid sampled them, give or take a sample: search a
+    // finer grid around each of the largest, so that the figure does not depend on where the
+    // samples fell (another sampling of the same Ω, as an independent check makes, finds more
+    // between them otherwise).
+    const double e = refined_max(given ? *given : index, motion, cutter, reported, options.refine_max);
+    patch.error.max = std::max(patch.error.max, std::abs(e));
+    if (e < 0) patch.error.max_gouge = std::max(patch.error.max_gouge, -e);
+    patch.error.max_relative = patch.error.max / (given ? given : &index)->diagonal();
+  }
 
   // The deviation seen from Φ's vertices under Ω as well: samples of Ω fall between the peaks
   // of a scanned Φ (its noise sits at the vertices), so its largest deviation depends on the
@@ -292,6 +343,8 @@ Patch evaluate_patch(const SurfaceIndex& index, const Motion& motion, const Cutt
       patch.error.max_relative = patch.error.max / phi_index->diagonal();
     }
   }
+  // Without a smoothed copy the patch is judged on everything reported.
+  if (!given) patch.error.judged_gouge = patch.error.max_gouge;
 
   if (options.holder) {
     // The holder: a cylinder of the given radius on the half-axis beyond the spindle end b.

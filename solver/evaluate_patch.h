@@ -89,6 +89,9 @@ struct EvaluateOptions {
   // at the vertices, between Ω's samples.
   double vertex_band = 10.0;
   bool vertex_side = true;  // false: grid samples only (cheaper, for screening candidates)
+  // The reported max |e| is searched on finer sub-grids around this many of the largest
+  // samples (0: the grid alone), so that it does not depend on where the samples fell.
+  int refine_max = 8;
   // The surface evaluated against is a smoothed scan: see sample_errors.
   bool untrusted_edges = false;
 

@@ -199,13 +199,13 @@ struct Stepper {
     if (!(H.trace() > 0)) return l;
     const double trace = H.trace();
     H.diagonal().array() += 1e-6 * trace;  // the sweep itself is free: keep it still
-    if (options.hold_sweep && sweep.squaredNorm() > 0) {
-      // Each end may not move along the sweep: a stiff spring, as strong as the whole fit.
+    if (options.hold_sweep > 0 && sweep.squaredNorm() > 0) {
+      // A spring on each end against moving along the sweep (see PropagateOptions::hold_sweep).
       const Vec3 w = (sweep - sweep.dot(u) * u).normalized();
       Eigen::Matrix<double, 5, 1> ka, kb;
       ka << w.dot(n1), w.dot(n2), 0, 0, 0;
       kb << 0, 0, w.dot(n1), w.dot(n2), 0;
-      H.noalias() += trace * (ka * ka.transpose() + kb * kb.transpose());
+      H.noalias() += options.hold_sweep * trace * (ka * ka.transpose() + kb * kb.transpose());
     }
     // Axial position: where the part's edge crosses the line, it must cross it where it did at
     // the start. A cylinder may slide along its axis at no cost in distance, and the true
@@ -271,9 +271,11 @@ PropagateStop run(Stepper& st, const Line& start, const Vec3& initial_dir, doubl
     if (travel >= max_travel) return PropagateStop::max_travel;
     Vec3 va, vb;
     Movability mv;
-    if (!st.velocity(cur, ref, &va, &vb, &mv)) return PropagateStop::degenerate;
+    // A line wholly past Φ's edge has no movability at all: it left the surface.
+    const bool moves = st.velocity(cur, ref, &va, &vb, &mv);
     if (mv.status == MovabilityStatus::left_surface) return PropagateStop::left_surface;
     if (mv.status == MovabilityStatus::jump) return PropagateStop::jump;
+    if (!moves) return PropagateStop::degenerate;
     if (mv.value > st.options.max_movability) return PropagateStop::max_movability;
     *worst = std::max(*worst, mv.value);
     if (st.options.trace) {
