@@ -1,6 +1,7 @@
 // flank decompose: the whole part in, a small set of flank-millable patches out, with no line
 // drawn by hand.
 #include <CLI/CLI.hpp>
+#include <algorithm>
 #include <cstdio>
 #include <cstdlib>
 #include <optional>
@@ -97,7 +98,9 @@ int run_decompose(const DecomposeArgs& a) {
   if (o.holder) run.settings.push_back({"holder", std::vector<double>{o.holder_length, o.holder_radius}});
   run.tolerance = o.tolerance;
   run.coverage_fraction = r.coverage;
-  run.uncovered_area = r.total_area - r.covered_area;
+  // Area sums in a different order can leave -1e-11 mm^2 where nothing is left.
+  const double uncovered_area = std::max(0.0, r.total_area - r.covered_area);
+  run.uncovered_area = uncovered_area;
   run.coverage_curve = r.coverage_curve;
   for (const UncoveredRegion& u : r.uncovered) run.uncovered.push_back({u.area, u.centroid, u.vertices});
   run.timing_s = {{"index", index_s},   {"seeds", r.times.seeds},   {"candidates", r.times.candidates},
@@ -128,8 +131,11 @@ int run_decompose(const DecomposeArgs& a) {
   if (r.patches.empty())
     std::printf("  no patch meets the tolerance with the allowed cutters: try a larger --tolerance, "
                 "other --tool kinds or wider --radius/--length ranges\n");
-  std::printf("worst error %.3e mm; left for ball-end finishing: %.4g mm^2 in %zu region%s", worst,
-              r.total_area - r.covered_area, r.uncovered.size(), r.uncovered.size() == 1 ? "" : "s");
+  if (r.uncovered.empty() && uncovered_area <= 1e-9 * r.total_area)
+    std::printf("worst error %.3e mm; nothing left for ball-end finishing", worst);
+  else
+    std::printf("worst error %.3e mm; left for ball-end finishing: %.4g mm^2 in %zu region%s", worst,
+                uncovered_area, r.uncovered.size(), r.uncovered.size() == 1 ? "" : "s");
   for (std::size_t k = 0; k < std::min<std::size_t>(3, r.uncovered.size()); ++k)
     std::printf("%s %.3g mm^2 at (%.1f, %.1f, %.1f)", k ? "," : ":", r.uncovered[k].area,
                 r.uncovered[k].centroid.x(), r.uncovered[k].centroid.y(), r.uncovered[k].centroid.z());

@@ -166,6 +166,26 @@ TEST_F(Cli, DecomposeReportsNothingFoundAndRefusesImpossibleOptions) {
   expect_clean_failure(run("decompose " + mesh.string() + " --radius 5,1 -o " + out2.string()), "--radius", out2);
   expect_clean_failure(run("decompose " + mesh.string() + " --tool cone,drill -o " + out2.string()), "drill", out2);
   expect_clean_failure(run("decompose " + mesh.string() + " --length 0,10 -o " + out2.string()), "--length", out2);
+  expect_clean_failure(run("fit " + mesh.string() + " " + kLine + " --radius 5,1 -o " + out2.string()), "--radius", out2);
+}
+
+// A run says what each patch is and buys: its cutter kind, the coverage after 1..k patches on
+// stdout and in patches.json, and what is left for ball-end finishing.
+TEST_F(Cli, DecomposeShowsTheTradeOff) {
+  const fs::path mesh = dir_ / "part.stl";
+  ASSERT_EQ(run("synth --guides seed003 --tool cylinder:5 --resolution 61x21 -o " + mesh.string()).code, 0);
+  const fs::path out = dir_ / "results";
+  const CliRun r = run("decompose " + mesh.string() + " --tool cylinder,cone --tolerance-rel 3e-4 -q -o " + out.string());
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_NE(r.out.find("1 patch cover"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("patch 0: cylinder cutter"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("coverage after 1..1 patches:"), std::string::npos) << r.out;
+  EXPECT_NE(r.out.find("ball-end finishing"), std::string::npos) << r.out;
+  EXPECT_EQ(r.out.find("finishing: -"), std::string::npos) << r.out;  // no negative areas
+  std::ifstream json(out / "patches.json");
+  const std::string text(std::istreambuf_iterator<char>(json), {});
+  for (const char* key : {"\"curve\"", "\"uncovered_regions\"", "\"noise_sigma\"", "\"max_gouge\""})
+    EXPECT_NE(text.find(key), std::string::npos) << key;
 }
 
 TEST_F(Cli, HelpIsReadable) {
@@ -173,6 +193,12 @@ TEST_F(Cli, HelpIsReadable) {
   EXPECT_EQ(r.code, 0);
   EXPECT_NE(r.out.find("--tolerance"), std::string::npos);
   EXPECT_NE(r.out.find("--holder"), std::string::npos);
+  // decompose says its defaults: every cutter kind, radii and lengths relative to the part.
+  const CliRun d = run("decompose --help");
+  EXPECT_EQ(d.code, 0);
+  EXPECT_NE(d.out.find("every kind"), std::string::npos) << d.out;
+  EXPECT_NE(d.out.find("1%..10% of the diagonal"), std::string::npos) << d.out;
+  EXPECT_NE(d.out.find("3%..45% of the diagonal"), std::string::npos) << d.out;
 }
 
 }  // namespace
