@@ -26,7 +26,7 @@ struct DecomposeArgs : PatchArgs {
 
 std::vector<CutterKind> parse_kinds(const std::string& text) {
   std::vector<CutterKind> kinds;
-  std::stringstream in(text);
+  std::stringstream in(text + ",");  // so that a trailing comma gives an empty last item
   std::string item;
   while (std::getline(in, item, ',')) {
     CutterKind k;
@@ -36,6 +36,21 @@ std::vector<CutterKind> parse_kinds(const std::string& text) {
   }
   if (kinds.empty()) throw UsageError("--tool needs at least one cutter kind");
   return kinds;
+}
+
+// Cutters far smaller or larger than the part are refused, not searched for: a length of
+// 1e-300 mm would make the search lay out lines that cut nothing. The floors are far below
+// any real tool on a part of that size (the defaults are 1% and 3% of the diagonal).
+void check_ranges(const DecomposeOptions& o, double diagonal) {
+  auto mm = [](double v) { return std::to_string(v) + " mm"; };
+  if (o.length_min > 0 && o.length_min < 0.01 * diagonal)
+    throw UsageError("--length MIN is below 1% of the part's diagonal (" + mm(0.01 * diagonal) + ")");
+  if (o.length_max > 2.0 * diagonal)
+    throw UsageError("--length MAX is above twice the part's diagonal (" + mm(2.0 * diagonal) + ")");
+  if (o.radius_min > 0 && o.radius_min < 0.001 * diagonal)
+    throw UsageError("--radius MIN is below 0.1% of the part's diagonal (" + mm(0.001 * diagonal) + ")");
+  if (o.radius_max > diagonal)
+    throw UsageError("--radius MAX is above the part's diagonal (" + mm(diagonal) + ")");
 }
 
 int run_decompose(const DecomposeArgs& a) {
@@ -48,11 +63,13 @@ int run_decompose(const DecomposeArgs& a) {
     o.holder = true;
     std::tie(o.holder_length, o.holder_radius) = parse_pair(a.holder, "--holder");
   }
+  if (!(a.coverage > 0 && a.coverage <= 1)) throw UsageError("--coverage must be in (0, 1]");
   o.coverage_target = a.coverage;
   o.max_patches = a.max_patches;
   resolve_tolerance(a.tolerance, a.tolerance_rel, 1.0);  // refuse bad values before any work
   o.tolerance = 1.0;                                     // placeholder until the diagonal is known
   if (std::string e = o.validate(); !e.empty()) throw UsageError(e);
+  const std::unique_ptr<io::OutputSet> out = open_outputs(a);  // checked before any work
 
   ThreadLimit limit(a.threads);
   io::ReadOptions ro;
@@ -66,6 +83,7 @@ int run_decompose(const DecomposeArgs& a) {
   const double diagonal = index.diagonal();
   o.tolerance = resolve_tolerance(a.tolerance, a.tolerance_rel, diagonal);
   progress.stage("indexed; tolerance " + std::to_string(o.tolerance) + " mm");
+  check_ranges(o, diagonal);
 
   // Diagnostics for developers: every candidate line, grown piece and round on stderr.
   if (std::getenv("FLANK_TRACE_DECOMPOSE")) o.trace = [](const std::string& s) { std::fprintf(stderr, "%s\n", s.c_str()); };
@@ -107,9 +125,9 @@ int run_decompose(const DecomposeArgs& a) {
                   {"fit", r.times.fit}, {"cover", r.times.cover},   {"finish", r.times.finish},
                   {"total", total}};
 
-  write_outputs(a, run, r.patches, lm.mesh, r.vertex_patch, o.tolerance);
+  write_outputs(*out, a, run, r.patches, lm.mesh, r.vertex_patch, o.tolerance);
 
-  std::printf("%s: %zu patch%s cover %.2f%% of %.4g mm^2 within %.3g mm\n", a.mesh.c_str(),
+  std::printf("%s: %zu patch%s cover %.2f%% of %.4g mm^2 within %.3g mm\n", printable(a.mesh).c_str(),
               r.patches.size(), r.patches.size() == 1 ? "" : "es", 100.0 * r.coverage, r.total_area,
               o.tolerance);
   if (r.smoothed)
@@ -147,7 +165,7 @@ int run_decompose(const DecomposeArgs& a) {
               "cover %.2fs, finish %.2fs, total %.2fs\n",
               index_s, r.times.seeds, r.times.candidates, r.lines_scored, r.candidates, r.times.fit, r.grown,
               r.times.cover, r.times.finish, total);
-  std::printf("results in %s: patches.json envelopes.ply design.ply toolpath.apt\n", a.out_dir.c_str());
+  std::printf("results in %s: patches.json envelopes.ply design.ply toolpath.apt\n", printable(a.out_dir).c_str());
   return 0;
 }
 

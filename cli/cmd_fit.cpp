@@ -22,6 +22,11 @@ namespace {
 // same range as decompose's.
 constexpr double kDefaultRadiusMin = 0.01;
 constexpr double kDefaultRadiusMax = 0.10;
+// The shortest --line accepted, as a fraction of the diagonal.
+constexpr double kMinLine = 1e-3;
+// The fit's sample grid, at most: 2,000 × 200 samples already resolve a sweep far finer than
+// any tolerance, and the Jacobian of a larger grid would not fit in memory.
+constexpr int kMaxSamplesT = 2000, kMaxSamplesS = 200;
 
 struct FitArgs : PatchArgs {
   std::string line, lines_file, tool = "cone", radius;
@@ -64,6 +69,7 @@ int run_fit(const FitArgs& a) {
   if (!a.lines_file.empty()) user_lines = read_lines_file(a.lines_file);
 
   resolve_tolerance(a.tolerance, a.tolerance_rel, 1.0);  // refuse bad values before any work
+  const std::unique_ptr<io::OutputSet> out = open_outputs(a);  // checked before any work
   ThreadLimit limit(a.threads);
   io::ReadOptions ro;
   ro.flip = a.flip;
@@ -75,6 +81,10 @@ int run_fit(const FitArgs& a) {
   const double index_s = progress.elapsed() - t_index;
   const double diagonal = index.diagonal();
   const double tol = resolve_tolerance(a.tolerance, a.tolerance_rel, diagonal);
+  // A line far shorter than the part is no cutter axis (a typo, or coordinates in metres).
+  if (user_line && user_line->length() < kMinLine * diagonal)
+    throw UsageError("--line is " + std::to_string(user_line->length()) + " mm long; a cutter axis needs at least " +
+                     std::to_string(kMinLine * diagonal) + " mm (0.1% of the part's diagonal)");
   const double radius_min = radius ? radius->first : kDefaultRadiusMin * diagonal;
   const double radius_max = radius ? radius->second : kDefaultRadiusMax * diagonal;
   progress.stage("indexed; tolerance " + std::to_string(tol) + " mm, sphere radii " +
@@ -117,7 +127,7 @@ int run_fit(const FitArgs& a) {
   const FitPatchResult fit = fit_and_trim(index, init, fo);
   progress.stage("fit: " + fit.fit.brief_report() + ", " + std::to_string(fit.rounds) + " trims");
   if (fit.status != FitPatchStatus::ok) {
-    std::fprintf(stderr, "flank fit: %s: no patch (%s)\n", a.mesh.c_str(), fit.message.c_str());
+    std::fprintf(stderr, "flank fit: %s: no patch (%s)\n", printable(a.mesh).c_str(), fit.message.c_str());
     return 1;
   }
 
@@ -125,9 +135,20 @@ int run_fit(const FitArgs& a) {
   eo.tolerance = tol;
   eo.rows = std::max(200, 2 * a.samples_t);
   eo.cols = std::max(60, 2 * a.samples_s);
+  // The check samples densely on its own, whatever --samples-t/-s the fit used: neighbouring
+  // axis samples at most 0.25% of the diagonal apart, as decompose's final evaluation.
+  eo.spacing = 0.0025 * diagonal;
   if (holder) eo.holder = true, eo.holder_length = holder->first, eo.holder_radius = holder->second;
   Patch patch = evaluate_patch(index, fit.fit.motion, fit.fit.cutter, eo);
   patch.id = 0;
+  // A cutter that gouges the part is never a result, however the fit was sampled.
+  if (patch.error.max_gouge > tol) {
+    std::fprintf(stderr,
+                 "flank fit: %s: no patch: the fitted cutter gouges the part by %.4g mm, beyond the tolerance "
+                 "%.4g mm (try more --samples-t or another start); nothing written\n",
+                 printable(a.mesh).c_str(), patch.error.max_gouge, tol);
+    return 1;
+  }
   progress.stage("evaluated: max |e| " + std::to_string(patch.error.max) + " mm, coverage " +
                  std::to_string(100.0 * patch.coverage_fraction) + "%");
 
@@ -155,7 +176,7 @@ int run_fit(const FitArgs& a) {
   std::vector<Patch> patches{std::move(patch)};
   std::vector<int> vertex_patch(static_cast<std::size_t>(lm.mesh.vertex_count()), -1);
   for (int v : patches[0].covered_vertices) vertex_patch[static_cast<std::size_t>(v)] = 0;
-  write_outputs(a, run, patches, lm.mesh, vertex_patch, tol);
+  write_outputs(*out, a, run, patches, lm.mesh, vertex_patch, tol);
   const Patch& p = patches[0];
   std::printf("patch 0: %s cutter, length %.4f mm, sphere radii %.4f..%.4f mm\n",
               std::string(to_string(p.cutter.kind)).c_str(), p.cutter.length, p.cutter.radius(0),
@@ -167,7 +188,7 @@ int run_fit(const FitArgs& a) {
   if (p.collision.checked)
     std::printf("  holder %s (min clearance %.4g mm)\n", p.collision.holder_clear ? "clear" : "COLLIDES",
                 p.collision.min_clearance);
-  std::printf("results in %s: patches.json envelopes.ply design.ply toolpath.apt\n", a.out_dir.c_str());
+  std::printf("results in %s: patches.json envelopes.ply design.ply toolpath.apt\n", printable(a.out_dir).c_str());
   return 0;
 }
 
@@ -190,8 +211,8 @@ void register_fit(CLI::App& app, int* exit_code) {
                   "of the diagonal)");
   cmd->add_option("--control-points", a->control_points, "B-spline control points per axis end curve (default 40)")
       ->check(CLI::Range(4, 200));
-  cmd->add_option("--samples-t", a->samples_t, "Samples along the motion (default 100)")->check(CLI::Range(8, 100000));
-  cmd->add_option("--samples-s", a->samples_s, "Samples along the axis (default 30)")->check(CLI::Range(4, 10000));
+  cmd->add_option("--samples-t", a->samples_t, "Samples along the motion (default 100)")->check(CLI::Range(8, kMaxSamplesT));
+  cmd->add_option("--samples-s", a->samples_s, "Samples along the axis (default 30)")->check(CLI::Range(4, kMaxSamplesS));
   set_action(cmd, exit_code, [a] { return run_fit(*a); });
 }
 

@@ -20,11 +20,11 @@ void register_info(CLI::App& app, int* exit_code) {
     const io::LoadedMesh lm = io::read_mesh(*mesh_path, ro);
     const auto& r = lm.report;
     const BoundingBox box = bounding_box(lm.mesh);
-    std::printf("file            %s (%s)\n", mesh_path->c_str(), r.format.c_str());
+    std::printf("file            %s (%s)\n", printable(*mesh_path).c_str(), r.format.c_str());
     std::printf("vertices        %d (file: %d, welded: %d, unused removed: %d)\n",
                 lm.mesh.vertex_count(), r.input_vertices, r.welded_vertices, r.unused_vertices);
-    std::printf("triangles       %d (file: %d, degenerate dropped: %d)\n", lm.mesh.face_count(),
-                r.input_faces, r.degenerate_faces);
+    std::printf("triangles       %d (file: %d, degenerate dropped: %d, duplicates dropped: %d)\n",
+                lm.mesh.face_count(), r.input_faces, r.degenerate_faces, r.duplicate_faces);
     std::printf("orientation     %s, %d faces flipped to agree\n",
                 r.orientable ? "consistent" : "NOT orientable", r.flipped_faces);
     std::printf("components      %d\n", r.components);

@@ -13,6 +13,7 @@
 
 #include "cli/commands.h"
 #include "cli/common.h"
+#include "io/output_set.h"
 #include "io/read_mesh.h"
 #include "io/write.h"
 #include "kernels/cutter.h"
@@ -51,6 +52,10 @@ std::string number(double v) {
   out << v;
   return out.str();
 }
+
+// The longest cutter accepted (mm): far beyond any tool, short of lengths whose envelope
+// has no point in double precision.
+constexpr double kMaxLength = 1e5;
 
 double positive(double v, const std::string& what) {
   if (!(v > 0.0)) throw UsageError(what + " must be positive (got " + number(v) + ")");
@@ -122,6 +127,11 @@ int parse_side(const std::string& text) {
   throw UsageError("--side " + text + ": expected +1 or -1");
 }
 
+void check_length(double length) {
+  positive(length, "--length");
+  if (length > kMaxLength) throw UsageError("--length must be at most " + std::to_string(kMaxLength) + " mm");
+}
+
 struct SynthArgs {
   std::string guides, motion_file, tool, resolution = "241x61", side = "+1", output;
   double length = kPaperToolLength;
@@ -133,7 +143,9 @@ void run_synth(const SynthArgs& args, bool length_given) {
   SynthOptions options;
   parse_resolution(args.resolution, &options);
   options.side = parse_side(args.side);
-  if (const std::string problem = options.validate(); !problem.empty()) throw UsageError(problem);
+  // --side is checked by parse_side: what validate() can still refuse is the resolution.
+  if (const std::string problem = options.validate(); !problem.empty()) throw UsageError("--resolution: " + problem);
+  io::check_output_file(args.output);  // before any work
 
   AxisMotion motion;
   std::string source;
@@ -142,7 +154,7 @@ void run_synth(const SynthArgs& args, bool length_given) {
     if (args.guides != "seed003" && args.guides != "li-mann-bedi")
       throw UsageError("--guides " + args.guides +
                        ": unknown guiding curves (known: seed003, li-mann-bedi)");
-    positive(length, "--length");
+    check_length(length);
     motion = guide_motion(paper_guides(), length);
     source = "guides " + args.guides;
   } else {
@@ -150,7 +162,7 @@ void run_synth(const SynthArgs& args, bool length_given) {
     // The sphere radii of a cone or barrel are laid out over the axis length; a motion file
     // carries its own axis, so its mean length is the default.
     if (!length_given) length = m.mean_length();
-    positive(length, "--length");
+    check_length(length);
     motion = spline_motion(m);
     source = "motion " + args.motion_file;
   }
@@ -165,14 +177,14 @@ void run_synth(const SynthArgs& args, bool length_given) {
     msg << result.invalid << " sample(s) have no envelope point (first at t = "
         << result.invalid_t << ", s = " << result.invalid_s
         << "): the axis does not sweep across itself there or |d'| reaches the axis length; "
-           "nothing written";
+           "nothing written (check --tool, --length and the motion)";
     throw UsageError(msg.str());
   }
   io::write_mesh(args.output, result.mesh);
 
   const double diagonal = bbox_diagonal(result.mesh);
   std::ostringstream out;
-  out << "wrote " << args.output << " (" << source << ", " << tool.description << ", side "
+  out << "wrote " << printable(args.output) << " (" << source << ", " << tool.description << ", side "
       << (options.side > 0 ? "+1" : "-1") << ", " << options.rows << "x" << options.cols
       << "): " << result.mesh.vertex_count() << " vertices, " << result.mesh.face_count()
       << " triangles, bbox diagonal " << diagonal << " mm, chord error " << result.chord_error

@@ -3,34 +3,59 @@
 #include <CLI/CLI.hpp>
 #include <filesystem>
 
+#include <cctype>
 #include <cmath>
+#include <cstdlib>
 #include <cstdio>
 #include <fstream>
 #include <sstream>
 
+#include "io/read_lines.h"
+
 namespace flank::cli {
 
 namespace {
-std::vector<double> parse_numbers(std::string text, const std::string& option) {
-  for (char& c : text)
-    if (c == ',') c = ' ';
-  std::istringstream in(text);
-  std::vector<double> out;
-  std::string token;
-  while (in >> token) {
-    std::size_t used = 0;
-    double v = 0;
-    try {
-      v = std::stod(token, &used);
-    } catch (const std::exception&) {
-      used = 0;
-    }
-    if (used != token.size() || !std::isfinite(v))
-      throw UsageError(option + ": '" + token + "' is not a finite number");
-    out.push_back(v);
+// A plain decimal number: digits with an optional point and exponent. strtod would also take
+// hexadecimal ("0x10" = 16), "inf" and "nan", none of which a length written by a person is.
+bool is_decimal(const std::string& t) {
+  std::size_t i = 0, digits = 0;
+  if (i < t.size() && (t[i] == '+' || t[i] == '-')) ++i;
+  for (; i < t.size() && std::isdigit(static_cast<unsigned char>(t[i])); ++i) ++digits;
+  if (i < t.size() && t[i] == '.')
+    for (++i; i < t.size() && std::isdigit(static_cast<unsigned char>(t[i])); ++i) ++digits;
+  if (digits == 0) return false;
+  if (i < t.size() && (t[i] == 'e' || t[i] == 'E')) {
+    ++i;
+    if (i < t.size() && (t[i] == '+' || t[i] == '-')) ++i;
+    std::size_t exp_digits = 0;
+    for (; i < t.size() && std::isdigit(static_cast<unsigned char>(t[i])); ++i) ++exp_digits;
+    if (exp_digits == 0) return false;
   }
+  return i == t.size();
+}
+
+// Numbers separated by commas (or blanks); an empty item ("1,,2", "1,") is an error, not
+// skipped: a value left out by mistake must not shift the others.
+std::vector<double> parse_numbers(const std::string& text, const std::string& option) {
+  std::vector<double> out;
+  std::string item;
+  std::istringstream items(text);
+  while (std::getline(items, item, ',')) {
+    std::istringstream in(item);
+    std::string token;
+    int tokens = 0;
+    while (in >> token) {
+      ++tokens;
+      const double v = is_decimal(token) ? std::strtod(token.c_str(), nullptr) : NAN;
+      if (!std::isfinite(v)) throw UsageError(option + ": '" + token + "' is not a finite decimal number");
+      out.push_back(v);
+    }
+    if (tokens == 0) throw UsageError(option + ": an empty value between commas in '" + text + "'");
+  }
+  if (!text.empty() && text.back() == ',') throw UsageError(option + ": a trailing comma in '" + text + "'");
   return out;
 }
+
 }  // namespace
 
 Line parse_line(const std::string& text, const std::string& option) {
@@ -49,31 +74,39 @@ std::pair<double, double> parse_pair(const std::string& text, const std::string&
 }
 
 std::vector<Line> read_lines_file(const std::string& path) {
-  std::ifstream in(path);
-  if (!in) throw io::Error(path + ": cannot open lines file");
   std::vector<Line> lines;
-  std::string row;
-  int number = 0;
-  while (std::getline(in, row)) {
-    ++number;
-    if (const auto hash = row.find('#'); hash != std::string::npos) row.resize(hash);
-    if (row.find_first_not_of(" \t\r,") == std::string::npos) continue;
-    try {
-      lines.push_back(parse_line(row, "line " + std::to_string(number)));
-    } catch (const UsageError& e) {
-      throw io::Error(path + ": " + e.what());
+  for (const io::AxisRow& row : io::read_lines_file(path)) lines.push_back({row.a, row.b});
+  return lines;
+}
+
+std::string printable(const std::string& text) {
+  std::string out;
+  for (const char c : text) {
+    const auto u = static_cast<unsigned char>(c);
+    if (u == '\n') {
+      out += "\\n";
+    } else if (u < 0x20 || u == 0x7f) {
+      char hex[8];
+      std::snprintf(hex, sizeof hex, "\\x%02x", u);
+      out += hex;
+    } else {
+      out += c;
     }
   }
-  if (lines.size() < 2) throw io::Error(path + ": needs at least two lines, in motion order");
-  return lines;
+  return out;
 }
 
 void set_action(CLI::App* cmd, int* exit_code, std::function<int()> run) {
   cmd->callback([cmd, exit_code, run = std::move(run)]() {
     try {
+      // An option given an empty value ('--holder ""') is a mistake, not "not given".
+      for (const CLI::Option* opt : cmd->get_options())
+        if (opt->get_expected_min() > 0)
+          for (const std::string& value : opt->results())
+            if (value.empty()) throw UsageError(opt->get_name() + ": empty value");
       *exit_code = run();
     } catch (const std::exception& e) {
-      std::fprintf(stderr, "flank %s: %s\n", cmd->get_name().c_str(), e.what());
+      std::fprintf(stderr, "flank %s: %s\n", cmd->get_name().c_str(), printable(e.what()).c_str());
       *exit_code = 2;
     } catch (...) {
       std::fprintf(stderr, "flank %s: unexpected error\n", cmd->get_name().c_str());
@@ -91,7 +124,7 @@ double Progress::elapsed() const {
 
 void Progress::stage(const std::string& what) {
   if (quiet_) return;
-  std::fprintf(stderr, "[%6.2fs] flank %s: %s\n", elapsed(), command_.c_str(), what.c_str());
+  std::fprintf(stderr, "[%6.2fs] flank %s: %s\n", elapsed(), command_.c_str(), printable(what).c_str());
   std::fflush(stderr);
 }
 
@@ -124,17 +157,20 @@ void add_patch_options(CLI::App* cmd, PatchArgs& a) {
   cmd->add_flag("-q,--quiet", a.quiet, "No progress lines on stderr");
 }
 
-void write_outputs(const PatchArgs& a, const io::RunInfo& run, const std::vector<Patch>& patches,
-                   const Mesh& mesh, const std::vector<int>& vertex_patch, double tolerance) {
-  std::error_code ec;
-  std::filesystem::create_directories(a.out_dir, ec);
-  if (ec) throw io::Error(a.out_dir + ": cannot create output folder: " + ec.message());
-  const std::filesystem::path dir(a.out_dir);
-  io::write_patches_json(dir / "patches.json", run, patches);
-  io::write_envelopes_ply(dir / "envelopes.ply", patches, tolerance);
-  io::write_design_ply(dir / "design.ply", mesh, vertex_patch);
-  io::write_toolpath_apt(dir / "toolpath.apt", patches, a.apt_steps,
+std::unique_ptr<io::OutputSet> open_outputs(const PatchArgs& a) {
+  return std::make_unique<io::OutputSet>(
+      a.out_dir, std::vector<std::string>{"patches.json", "envelopes.ply", "design.ply", "toolpath.apt"});
+}
+
+void write_outputs(io::OutputSet& out, const PatchArgs& a, const io::RunInfo& run,
+                   const std::vector<Patch>& patches, const Mesh& mesh,
+                   const std::vector<int>& vertex_patch, double tolerance) {
+  io::write_patches_json(out.staged("patches.json"), run, patches);
+  io::write_envelopes_ply(out.staged("envelopes.ply"), patches, tolerance);
+  io::write_design_ply(out.staged("design.ply"), mesh, vertex_patch);
+  io::write_toolpath_apt(out.staged("toolpath.apt"), patches, a.apt_steps,
                          std::filesystem::path(a.mesh).stem().string());
+  out.commit();
 }
 
 }  // namespace flank::cli

@@ -4,11 +4,13 @@
 
 #include <chrono>
 #include <functional>
+#include <memory>
 #include <optional>
 #include <stdexcept>
 #include <string>
 #include <vector>
 
+#include "io/output_set.h"
 #include "io/read_mesh.h"
 #include "io/write.h"
 #include "solver/motion.h"
@@ -29,16 +31,23 @@ struct PatchArgs {
 };
 void add_patch_options(CLI::App* cmd, PatchArgs& a);
 
-// patches.json, envelopes.ply, design.ply and toolpath.apt into a.out_dir (created if
-// missing), each written atomically.
-void write_outputs(const PatchArgs& a, const io::RunInfo& run, const std::vector<Patch>& patches,
-                   const Mesh& mesh, const std::vector<int>& vertex_patch, double tolerance);
+// The output folder a.out_dir, checked and created before any work (io::OutputSet).
+std::unique_ptr<io::OutputSet> open_outputs(const PatchArgs& a);
+// patches.json, envelopes.ply, design.ply and toolpath.apt, written into `out` and moved into
+// place together: the earlier run's set is replaced all or nothing.
+void write_outputs(io::OutputSet& out, const PatchArgs& a, const io::RunInfo& run,
+                   const std::vector<Patch>& patches, const Mesh& mesh,
+                   const std::vector<int>& vertex_patch, double tolerance);
 
 // An impossible option or unusable value: the CLI prints "flank CMD: message" and exits 2.
 class UsageError : public std::runtime_error {
  public:
   using std::runtime_error::runtime_error;
 };
+
+// `text` with control characters escaped (a newline as \n, others as \xNN): a path or a
+// file's bytes echoed in a message stay one line and cannot drive the terminal.
+std::string printable(const std::string& text);
 
 // Makes `run` the subcommand's action: its return value is the exit code, and any exception
 // becomes one line "flank CMD: message" on stderr and exit code 2.
@@ -48,8 +57,7 @@ void set_action(CLI::App* cmd, int* exit_code, std::function<int()> run);
 Line parse_line(const std::string& text, const std::string& option);
 // "A,B" → two positive numbers.
 std::pair<double, double> parse_pair(const std::string& text, const std::string& option);
-// One line per row "x0 y0 z0 x1 y1 z1" (commas also accepted, '#' comments); io::Error on
-// unreadable or malformed files.
+// The axes of a --lines file (io/read_lines.h); io::Error on unreadable or malformed files.
 std::vector<Line> read_lines_file(const std::string& path);
 
 // Progress on stderr: each stage line carries the elapsed time; silent with --quiet.

@@ -8,19 +8,18 @@
 
 #include <algorithm>
 #include <array>
-#include <cerrno>
 #include <charconv>
 #include <cmath>
 #include <cstdint>
-#include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <limits>
-#include <memory>
 #include <numeric>
 #include <string_view>
 #include <utility>
 #include <vector>
+
+#include "io/read_file.h"
 
 namespace flank::io {
 namespace {
@@ -29,21 +28,9 @@ namespace {
 constexpr double kMaxCoordinate = 1e40;
 // A face is degenerate when its area is at most this times the squared bbox diagonal.
 constexpr double kDegenerateArea = 1e-14;
-constexpr long long kMaxElements = std::numeric_limits<int>::max() - 1;
 
 [[noreturn]] void fail(const std::string& path, const std::string& problem) {
   throw Error(path + ": " + problem);
-}
-
-// A token from the file, safe to quote in a one-line message.
-std::string token_text(std::string_view token) {
-  std::string out = "'";
-  for (std::size_t i = 0; i < token.size() && i < 24; ++i) {
-    const unsigned char c = static_cast<unsigned char>(token[i]);
-    out += (c >= 0x20 && c < 0x7f) ? static_cast<char>(c) : '?';
-  }
-  if (token.size() > 24) out += "...";
-  return out + "'";
 }
 
 bool equals_ci(std::string_view a, std::string_view b) {
@@ -90,14 +77,14 @@ class Lines {
     ++number_;
     return true;
   }
-  int number() const { return number_; }
+  long long number() const { return number_; }
   // The line just returned is the last one and has no newline: the file may be cut short.
   bool cut_short() const { return pos_ > data_.size() && !data_.empty() && data_.back() != '\n'; }
 
  private:
   std::string_view data_;
   std::size_t pos_ = 0;
-  int number_ = 0;
+  long long number_ = 0;  // a 4 GiB file may hold more lines than an int counts
 };
 
 // Parses a whole token as a double. Overflow yields ±inf and underflow 0, so that the caller
@@ -176,16 +163,42 @@ void check_coordinates(const std::string& path, const double* p, const std::stri
   }
 }
 
-void check_vertex_count(const std::string& path, std::size_t vertices) {
-  if (vertices > static_cast<std::size_t>(kMaxElements)) fail(path, "too many vertices");
+void check_vertex_count(const std::string& path, std::uint64_t vertices) {
+  if (vertices > static_cast<std::uint64_t>(kMaxVertices))
+    fail(path, "more than " + std::to_string(kMaxVertices) + " vertices (flank's limit)");
 }
 
-void fan_triangulate(const std::vector<int>& polygon, std::vector<int>& triangles) {
-  for (std::size_t i = 1; i + 1 < polygon.size(); ++i) {
-    triangles.push_back(polygon[0]);
-    triangles.push_back(polygon[i]);
-    triangles.push_back(polygon[i + 1]);
-  }
+// `triangles` is exact when it was counted ahead (a binary PLY's face list), or the count so
+// far when the file is refused as soon as it passes the limit.
+void check_triangle_count(const std::string& path, std::uint64_t triangles, bool exact = false) {
+  if (triangles <= static_cast<std::uint64_t>(kMaxTriangles)) return;
+  fail(path, (exact ? std::to_string(triangles) + " triangles after splitting polygons, more"
+                    : std::string("more")) +
+                 " than flank's limit of " + std::to_string(kMaxTriangles) + " triangles");
+}
+
+// A polygon of `corners` vertices is fan-triangulated: at least 3, at most the limit.
+void check_polygon(const std::string& path, const std::string& face, std::uint64_t corners,
+                   const std::string& where = "") {
+  if (corners < 3) fail(path, face + " has only " + std::to_string(corners) + " vertices" + where);
+  if (corners > static_cast<std::uint64_t>(kMaxPolygonVertices))
+    fail(path, face + " has " + std::to_string(corners) + " vertices (flank's limit is " +
+                   std::to_string(kMaxPolygonVertices) + " per polygon)" + where);
+}
+
+// The same when the vertices are not all read yet: refused as soon as one is too many.
+void check_polygon_growth(const std::string& path, const std::string& face, std::size_t corners,
+                          const std::string& where) {
+  if (corners > static_cast<std::size_t>(kMaxPolygonVertices))
+    fail(path, face + " has more than " + std::to_string(kMaxPolygonVertices) +
+                   " vertices (flank's limit per polygon)" + where);
+}
+
+// Appends the fan of `polygon` to `triangles`, three indices per triangle.
+template <typename Index>
+void fan_triangulate(const std::vector<Index>& polygon, std::vector<Index>& triangles) {
+  for (std::size_t i = 1; i + 1 < polygon.size(); ++i)
+    triangles.insert(triangles.end(), {polygon[0], polygon[i], polygon[i + 1]});
 }
 
 std::string_view skip_bom(std::string_view data) {
@@ -231,7 +244,14 @@ RawMesh parse_stl_binary(const std::string& path, std::string_view data) {
   if (expected > holds)
     fail(path, "truncated binary STL (expected " + std::to_string(expected) +
                    " triangles, file holds " + std::to_string(holds) + ")");
-  check_vertex_count(path, 3 * expected);
+  // More records than the count means a garbled header or two files glued together: reading
+  // only the count would drop part of the surface silently. A tail shorter than one record
+  // holds no triangle and is tolerated (some exporters pad).
+  if (holds > expected)
+    fail(path, "binary STL header says " + std::to_string(expected) +
+                   " triangles but the file holds " + std::to_string(holds) + " (" +
+                   std::to_string(data.size()) + " bytes)");
+  check_triangle_count(path, expected, true);
   RawMesh raw;
   raw.xyz.reserve(9 * expected);
   raw.triangles.reserve(3 * expected);
@@ -268,6 +288,7 @@ RawMesh parse_stl_ascii(const std::string& path, std::string_view data) {
                                         : "malformed vertex, expected 3 numbers") + at_line);
       check_coordinates(path, p, "facet " + std::to_string(facet + 1) + at_line.substr(1));
       check_vertex_count(path, raw.xyz.size() / 3 + 1);
+      check_polygon_growth(path, "facet " + std::to_string(facet + 1), loop.size() + 1, at_line);
       loop.push_back(static_cast<int>(raw.xyz.size() / 3));
       raw.xyz.insert(raw.xyz.end(), p, p + 3);
     } else if (equals_ci(token, "outer")) {
@@ -276,9 +297,8 @@ RawMesh parse_stl_ascii(const std::string& path, std::string_view data) {
       loop.clear();
     } else if (equals_ci(token, "endloop")) {
       if (!in_loop) fail(path, "'endloop' without 'outer loop'" + at_line);
-      if (loop.size() < 3)
-        fail(path, "facet " + std::to_string(facet + 1) + " has only " +
-                       std::to_string(loop.size()) + " vertices" + at_line);
+      check_polygon(path, "facet " + std::to_string(facet + 1), loop.size(), at_line);
+      check_triangle_count(path, raw.triangles.size() / 3 + loop.size() - 2);
       fan_triangulate(loop, raw.triangles);
       in_loop = false;
       ++facet;
@@ -286,7 +306,7 @@ RawMesh parse_stl_ascii(const std::string& path, std::string_view data) {
                equals_ci(token, "solid") || equals_ci(token, "endsolid")) {
       if (in_loop) fail(path, "facet " + std::to_string(facet + 1) + " loop not closed" + at_line);
     } else {
-      fail(path, "unexpected " + token_text(token) + " in ASCII STL" + at_line);
+      fail(path, "unexpected " + quote_text(token) + " in ASCII STL" + at_line);
     }
   }
   if (in_loop) fail(path, "truncated ASCII STL (facet " + std::to_string(facet + 1) + " not closed)");
@@ -326,9 +346,15 @@ RawMesh parse_obj(const std::string& path, std::string_view data) {
       const long long preceding = static_cast<long long>(raw.xyz.size() / 3);
       std::string_view corner;
       while (next_token(line, corner)) {
+        if (polygon.size() == static_cast<std::size_t>(kMaxPolygonVertices)) {
+          // One line may be the whole file: count the rest rather than store it.
+          std::uint64_t corners = polygon.size() + 1;
+          for (std::string_view more; next_token(line, more);) ++corners;
+          check_polygon(path, "face " + std::to_string(face), corners, at_line);
+        }
         long long index;
         if (!parse_integer(corner.substr(0, corner.find('/')), index))
-          fail(path, "malformed face " + std::to_string(face) + ": " + token_text(corner) + at_line);
+          fail(path, "malformed face " + std::to_string(face) + ": " + quote_text(corner) + at_line);
         if (index == 0) fail(path, "face " + std::to_string(face) + " has vertex index 0" + at_line);
         if (index < 0) {
           if (index < -preceding)
@@ -340,18 +366,14 @@ RawMesh parse_obj(const std::string& path, std::string_view data) {
           polygon.push_back(index - 1);
         }
       }
-      if (polygon.size() < 3)
-        fail(path, "face " + std::to_string(face) + " has only " + std::to_string(polygon.size()) +
-                       " vertices" + at_line);
-      for (std::size_t i = 1; i + 1 < polygon.size(); ++i) {
-        indices.insert(indices.end(), {polygon[0], polygon[i], polygon[i + 1]});
-        triangle_face.push_back(face);
-      }
+      check_polygon(path, "face " + std::to_string(face), polygon.size(), at_line);
+      check_triangle_count(path, triangle_face.size() + polygon.size() - 2);
+      fan_triangulate(polygon, indices);
+      triangle_face.resize(indices.size() / 3, face);
     }
     // Everything else (vt, vn, g, o, s, usemtl, mtllib, l, p, ...) does not shape Φ.
   }
   const long long vertices = static_cast<long long>(raw.xyz.size() / 3);
-  if (static_cast<long long>(indices.size() / 3) > kMaxElements) fail(path, "too many faces");
   raw.triangles.resize(indices.size());
   for (std::size_t i = 0; i < indices.size(); ++i) {
     if (indices[i] >= vertices)
@@ -444,6 +466,14 @@ class PlyBody {
   }
 
   std::size_t remaining_bytes() const { return body_.size() - pos_; }
+  bool binary() const { return binary_; }
+
+  // Binary only: passes over `bytes`; false if fewer remain.
+  bool skip(std::uint64_t bytes) {
+    if (bytes > remaining_bytes()) return false;
+    pos_ += static_cast<std::size_t>(bytes);
+    return true;
+  }
 
  private:
   std::string_view body_;
@@ -456,13 +486,70 @@ bool integral_in(double v, double lo, double hi) {
   return std::isfinite(v) && v >= lo && v <= hi && v == std::floor(v);
 }
 
+// Counts are claims: before anything is reserved, each element's rows must fit in the body
+// (a binary row takes at least its fixed-size fields, an ASCII value a byte and a separator),
+// the vertices must be within the limit, and a binary face list must not make more triangles
+// than the limit (issue 14: 20 MB of 255-gons made 20.7 M triangles).
+void check_ply_counts(const std::string& path, const std::vector<PlyElement>& elements,
+                      const PlyElement* vertex_element, const PlyElement* face_element,
+                      int index_property, PlyBody body) {
+  const bool binary = body.binary();
+  std::uint64_t ascii_bytes = body.remaining_bytes() + 1;  // the last value needs no separator
+  for (const PlyElement& element : elements) {
+    std::uint64_t min_row = 0;
+    bool has_list = false;
+    for (const PlyProperty& property : element.properties) {
+      min_row += binary ? ply_type_size(property.is_list ? property.count_type : property.type) : 2;
+      has_list = has_list || property.is_list;
+    }
+    if (min_row == 0) continue;  // rows without properties occupy no bytes
+    const std::uint64_t fits = (binary ? body.remaining_bytes() : ascii_bytes) / min_row;
+    if (static_cast<std::uint64_t>(element.count) > fits)
+      fail(path, std::string("truncated ") + (binary ? "binary " : "") + "PLY (expected " +
+                     std::to_string(element.count) + " " + element.name +
+                     " rows, file holds at most " + std::to_string(fits) + ")");
+    if (&element == vertex_element) check_vertex_count(path, element.count);
+    if (&element == face_element) check_triangle_count(path, element.count);
+    if (!binary) {  // ASCII rows are counted while read
+      ascii_bytes -= static_cast<std::uint64_t>(element.count) * min_row;
+      continue;
+    }
+    if (!has_list) {
+      body.skip(static_cast<std::uint64_t>(element.count) * min_row);  // fits, checked above
+      continue;
+    }
+    std::uint64_t triangles = 0;
+    bool complete = true;
+    for (long long r = 0; r < element.count && complete; ++r)
+      for (std::size_t q = 0; q < element.properties.size() && complete; ++q) {
+        const PlyProperty& property = element.properties[q];
+        if (!property.is_list) {
+          complete = body.skip(ply_type_size(property.type));
+          continue;
+        }
+        double count = 0;
+        complete = body.read(property.count_type, count) == ReadStatus::ok && count >= 0;
+        if (!complete) break;
+        if (&element == face_element && static_cast<int>(q) == index_property) {
+          if (count > static_cast<double>(kMaxPolygonVertices))
+            check_polygon(path, "face " + std::to_string(r), static_cast<std::uint64_t>(count));
+          if (count >= 3) triangles += static_cast<std::uint64_t>(count) - 2;
+        }
+        complete = body.skip(static_cast<std::uint64_t>(count) * ply_type_size(property.type));
+      }
+    // A truncated list is reported by the reading pass, after this check of what it holds.
+    check_triangle_count(path, triangles, true);
+    if (!complete) return;
+  }
+}
+
 RawMesh parse_ply(const std::string& path, std::string_view data, std::string& format) {
   // Header.
   std::size_t pos = 0;
   std::vector<PlyElement> elements;
   enum class Encoding { none, ascii, binary_le } encoding = Encoding::none;
   bool ended = false;
-  for (int number = 1; pos < data.size(); ++number) {
+  for (long long number = 1; pos < data.size(); ++number) {
     const std::size_t end = data.find('\n', pos);
     if (end == std::string_view::npos) break;
     std::string_view line = data.substr(pos, end - pos);
@@ -491,13 +578,16 @@ RawMesh parse_ply(const std::string& path, std::string_view data, std::string& f
         fail(path, "binary_big_endian PLY is unsupported (convert it to binary_little_endian "
                    "or ascii)");
       } else {
-        fail(path, "unsupported PLY format " + token_text(a) + at_line);
+        fail(path, "unsupported PLY format " + quote_text(a) + at_line);
       }
     } else if (keyword == "element") {
       long long count;
       if (!next_token(line, a) || !next_token(line, b) || !parse_integer(b, count) || count < 0)
         fail(path, "malformed PLY element line" + at_line);
-      if (count > kMaxElements) fail(path, "PLY element " + token_text(a) + " is too large" + at_line);
+      // The name goes into messages ("truncated PLY (expected 3 vertex rows ..."): printable
+      // only, so that a file's bytes never reach the terminal (found by fuzz_ply).
+      if (quote_text(a, a.size()) != "'" + std::string(a) + "'")
+        fail(path, "malformed PLY element name " + quote_text(a) + at_line);
       elements.push_back({std::string(a), count, {}});
     } else if (keyword == "property") {
       if (elements.empty()) fail(path, "PLY property before any element" + at_line);
@@ -512,12 +602,12 @@ RawMesh parse_ply(const std::string& path, std::string_view data, std::string& f
         property.name = std::string(d);
       } else {
         if (!parse_ply_type(a, property.type) || !next_token(line, b))
-          fail(path, "malformed PLY property " + token_text(a) + at_line);
+          fail(path, "malformed PLY property " + quote_text(a) + at_line);
         property.name = std::string(b);
       }
       elements.back().properties.push_back(std::move(property));
     } else {
-      fail(path, "unexpected " + token_text(keyword) + " in PLY header" + at_line);
+      fail(path, "unexpected " + quote_text(keyword) + " in PLY header" + at_line);
     }
   }
   if (!ended) fail(path, "truncated PLY header (no end_header)");
@@ -553,6 +643,7 @@ RawMesh parse_ply(const std::string& path, std::string_view data, std::string& f
 
   // Body.
   PlyBody body(data.substr(pos), binary);
+  check_ply_counts(path, elements, vertex_element, face_element, index_property, body);
   RawMesh raw;
   std::vector<long long> indices;
   std::vector<long long> triangle_face;
@@ -561,17 +652,7 @@ RawMesh parse_ply(const std::string& path, std::string_view data, std::string& f
     if (element.properties.empty()) continue;  // rows without properties occupy no bytes
     const bool is_vertex = &element == vertex_element;
     const bool is_face = &element == face_element;
-    if (binary) {  // fixed-size rows: check the size before allocating anything
-      std::size_t row = 0;
-      for (const PlyProperty& property : element.properties)
-        row += ply_type_size(property.is_list ? property.count_type : property.type);
-      if (static_cast<std::uint64_t>(element.count) * row > body.remaining_bytes())
-        fail(path, "truncated binary PLY (expected " + std::to_string(element.count) + " " +
-                       element.name + " rows, file holds at most " +
-                       std::to_string(body.remaining_bytes() / row) + ")");
-    }
-    if (is_vertex)  // a count is a claim: reserve no more than the file could hold
-      raw.xyz.reserve(3 * std::min(static_cast<std::size_t>(element.count), data.size() / 2));
+    if (is_vertex) raw.xyz.reserve(3 * static_cast<std::size_t>(element.count));  // checked
     for (long long r = 0; r < element.count; ++r) {
       double p[3] = {0, 0, 0};
       for (std::size_t q = 0; q < element.properties.size(); ++q) {
@@ -595,10 +676,12 @@ RawMesh parse_ply(const std::string& path, std::string_view data, std::string& f
         }
         double count;
         read(property.count_type, count);
-        if (!integral_in(count, 0, static_cast<double>(kMaxElements)))
-          fail(path, "invalid PLY list length" + where());
+        if (!integral_in(count, 0, 4294967295.0)) fail(path, "invalid PLY list length" + where());
         const bool indices_here = is_face && index_property == static_cast<int>(q);
-        if (indices_here) polygon.clear();
+        if (indices_here) {
+          check_polygon(path, "face " + std::to_string(r), static_cast<std::uint64_t>(count));
+          polygon.clear();
+        }
         for (long long i = 0; i < static_cast<long long>(count); ++i) {
           double value;
           read(property.type, value);
@@ -611,15 +694,9 @@ RawMesh parse_ply(const std::string& path, std::string_view data, std::string& f
           polygon.push_back(static_cast<long long>(value));
         }
         if (indices_here) {
-          if (polygon.size() < 3)
-            fail(path, "face " + std::to_string(r) + " has only " +
-                           std::to_string(polygon.size()) + " vertices");
-          for (std::size_t i = 1; i + 1 < polygon.size(); ++i) {
-            indices.insert(indices.end(), {polygon[0], polygon[i], polygon[i + 1]});
-            triangle_face.push_back(r);
-          }
-          if (static_cast<long long>(indices.size() / 3) > kMaxElements)
-            fail(path, "too many faces");
+          check_triangle_count(path, triangle_face.size() + polygon.size() - 2);
+          fan_triangulate(polygon, indices);
+          triangle_face.resize(indices.size() / 3, r);
         }
       }
       if (is_vertex) {
@@ -654,6 +731,33 @@ struct UnionFind {
     if (a != b) parent[std::max(a, b)] = std::min(a, b);
   }
 };
+
+// Removes every face on the same three vertices as an earlier face, in any order or
+// orientation, keeping the first; returns how many went. Copies make decompose crawl and
+// turn every edge non-manifold (issue 14 rows 8, 9): a part written twice reads as the part.
+int drop_duplicate_faces(std::vector<int>& triangles) {
+  const std::size_t nf = triangles.size() / 3;
+  std::vector<std::array<int, 3>> key(nf);
+  for (std::size_t f = 0; f < nf; ++f) {
+    std::copy_n(triangles.begin() + static_cast<std::ptrdiff_t>(3 * f), 3, key[f].begin());
+    std::sort(key[f].begin(), key[f].end());
+  }
+  std::vector<int> order(nf);
+  std::iota(order.begin(), order.end(), 0);
+  std::sort(order.begin(), order.end(),
+            [&](int a, int b) { return key[a] != key[b] ? key[a] < key[b] : a < b; });
+  std::vector<char> duplicate(nf, 0);
+  int dropped = 0;
+  for (std::size_t i = 1; i < nf; ++i)
+    if (key[order[i]] == key[order[i - 1]]) duplicate[order[i]] = 1, ++dropped;
+  if (dropped == 0) return 0;
+  std::size_t out = 0;
+  for (std::size_t f = 0; f < nf; ++f)
+    if (!duplicate[f])
+      for (int k = 0; k < 3; ++k) triangles[out++] = triangles[3 * f + k];
+  triangles.resize(out);
+  return dropped;
+}
 
 LoadedMesh repair(const std::string& path, RawMesh raw, std::string format,
                   const ReadOptions& options) {
@@ -710,10 +814,11 @@ LoadedMesh repair(const std::string& path, RawMesh raw, std::string format,
     }
     kept.insert(kept.end(), {a, b, c});
   }
-  const int nf = static_cast<int>(kept.size() / 3);
-  if (nf == 0)
+  if (kept.empty())
     fail(path, nt == 1 ? std::string("the only triangle is degenerate")
                        : "all " + std::to_string(nt) + " triangles are degenerate");
+  report.duplicate_faces = drop_duplicate_faces(kept);
+  const int nf = static_cast<int>(kept.size() / 3);
 
   // Remove unused vertices, keeping the file's order.
   std::vector<int> new_index(nv, -1);
@@ -817,24 +922,6 @@ std::string lower_extension(const std::string& path) {
   return ext;
 }
 
-std::string read_file(const std::string& path) {
-  std::error_code ec;
-  if (std::filesystem::is_directory(path, ec)) fail(path, "cannot open (Is a directory)");
-  struct Closer {
-    void operator()(std::FILE* f) const { std::fclose(f); }
-  };
-  std::unique_ptr<std::FILE, Closer> file(std::fopen(path.c_str(), "rb"));
-  if (!file) fail(path, std::string("cannot open (") + std::strerror(errno) + ")");
-  std::string data;
-  const auto size = std::filesystem::file_size(path, ec);
-  if (!ec) data.reserve(size);
-  char buffer[1 << 16];
-  std::size_t n;
-  while ((n = std::fread(buffer, 1, sizeof buffer, file.get())) > 0) data.append(buffer, n);
-  if (std::ferror(file.get())) fail(path, std::string("cannot read (") + std::strerror(errno) + ")");
-  return data;
-}
-
 bool has_obj_vertex_line(std::string_view data) {
   Lines lines(skip_bom(data));
   std::string_view line, token;
@@ -846,9 +933,12 @@ bool has_obj_vertex_line(std::string_view data) {
 }  // namespace
 
 LoadedMesh read_mesh(const std::string& path, const ReadOptions& options) {
-  const std::string data = read_file(path);
-  if (data.empty()) fail(path, "empty file");
-  const std::string_view view(data);
+  return read_mesh_bytes(path, read_regular_file(path, kMaxMeshFileBytes), options);
+}
+
+LoadedMesh read_mesh_bytes(const std::string& path, std::string_view view,
+                           const ReadOptions& options) {
+  if (view.empty()) fail(path, "empty file");
   const std::string ext = lower_extension(path);
   const bool ply_magic = view.substr(0, 4) == "ply\n" || view.substr(0, 5) == "ply\r\n";
 
@@ -877,7 +967,7 @@ LoadedMesh read_mesh(const std::string& path, const ReadOptions& options) {
       format = "obj";
       raw = parse_obj(path, view);
     } else {
-      fail(path, "unsupported mesh format" + (ext.empty() ? std::string() : " " + token_text(ext)) +
+      fail(path, "unsupported mesh format" + (ext.empty() ? std::string() : " " + quote_text(ext)) +
                      " (expected STL, OBJ or PLY)");
     }
   }

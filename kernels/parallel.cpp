@@ -1,11 +1,77 @@
 #include "kernels/parallel.h"
 
+#ifdef FLANK_TSAN_THREADS
+#include <tbb/global_control.h>
+
+#include <algorithm>
+#include <atomic>
+#include <thread>
+#include <vector>
+#else
 #include <tbb/blocked_range.h>
 #include <tbb/global_control.h>
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
+#endif
 
 namespace flank {
+
+#ifdef FLANK_TSAN_THREADS
+// The ThreadSanitizer build (scripts/test --tsan) runs the same chunks on plain std::threads.
+// oneTBB's scheduler lives in libtbb, which is not instrumented: TSan cannot see the
+// happens-before edges of its task pool and of the join at the end of a parallel_for, and
+// reports every parallel loop as a race. Thread creation and join it does see, so what it
+// reports here is a race in flank's own code. Chunks are taken from a shared counter by
+// max_threads() threads, the caller included, as TBB's workers would take them.
+namespace {
+std::atomic<int> g_thread_limit{0};
+
+void run_chunks(std::size_t chunks, const std::function<void(std::size_t)>& chunk) {
+  const std::size_t threads = std::min<std::size_t>(chunks, static_cast<std::size_t>(max_threads()));
+  std::atomic<std::size_t> next{0};
+  auto worker = [&] {
+    for (std::size_t c = next++; c < chunks; c = next++) chunk(c);
+  };
+  std::vector<std::thread> pool;
+  for (std::size_t t = 1; t < threads; ++t) pool.emplace_back(worker);
+  worker();
+  for (std::thread& t : pool) t.join();
+}
+}  // namespace
+
+void parallel_for(std::size_t begin, std::size_t end,
+                  const std::function<void(std::size_t, std::size_t)>& body, std::size_t grain) {
+  if (end <= begin) return;
+  if (grain == 0) grain = 1;
+  const std::size_t chunks = (end - begin + grain - 1) / grain;
+  run_chunks(chunks, [&](std::size_t c) { body(begin + c * grain, std::min(end, begin + (c + 1) * grain)); });
+}
+
+void parallel_invoke_each(std::size_t count, const std::function<void(std::size_t)>& task) {
+  run_chunks(count, task);
+}
+
+struct ThreadLimit::Impl {
+  int previous = 0;
+};
+
+ThreadLimit::ThreadLimit(int n) : impl_(std::make_unique<Impl>()) {
+  impl_->previous = g_thread_limit.load();
+  if (n > 0) g_thread_limit = n;
+}
+
+ThreadLimit::~ThreadLimit() { g_thread_limit = impl_->previous; }
+
+int max_threads() {
+  const int limit = g_thread_limit.load();
+  return limit > 0 ? limit : static_cast<int>(std::max(1u, std::thread::hardware_concurrency()));
+}
+
+void serialize_library_threads() {
+  static const tbb::global_control one_thread(tbb::global_control::max_allowed_parallelism, 1);
+}
+
+#else
 
 void parallel_for(std::size_t begin, std::size_t end,
                   const std::function<void(std::size_t, std::size_t)>& body, std::size_t grain) {
@@ -43,5 +109,9 @@ int max_threads() {
   return static_cast<int>(
       tbb::global_control::active_value(tbb::global_control::max_allowed_parallelism));
 }
+
+void serialize_library_threads() {}
+
+#endif  // FLANK_TSAN_THREADS
 
 }  // namespace flank

@@ -33,4 +33,9 @@ class ThreadLimit {
 // Threads available to parallel_for right now.
 int max_threads();
 
+// In the ThreadSanitizer build (FLANK_TSAN_THREADS) only: third-party code that threads
+// through oneTBB, Embree's BVH build, runs on the calling thread from now on, because TSan
+// cannot see the synchronisation inside those uninstrumented libraries. A no-op otherwise.
+void serialize_library_threads();
+
 }  // namespace flank

@@ -250,6 +250,7 @@ void SurfaceIndex::Impl::build_adjacency() {
 }
 
 void SurfaceIndex::Impl::build_scene() {
+  serialize_library_threads();  // the ThreadSanitizer build only (kernels/parallel.h)
   device = rtcNewDevice(nullptr);
   if (!device)
     throw std::runtime_error(std::string("SurfaceIndex: cannot create the Embree device (") +

@@ -2,16 +2,13 @@
 
 #include <algorithm>
 #include <cassert>
-#include <charconv>
 #include <cmath>
-#include <filesystem>
-#include <fstream>
 #include <limits>
 #include <memory>
 #include <sstream>
 #include <vector>
 
-#include "io/read_mesh.h"  // io::Error only (header-only exception type)
+#include "io/read_file.h"  // header-only: io::Error, reading the --motion file
 #include "kernels/bspline.h"
 #include "kernels/envelope.h"
 #include "kernels/parallel.h"
@@ -345,60 +342,26 @@ SynthResult synth_envelope(const AxisMotion& motion, const ToolProfile& tool,
   return result;
 }
 
-namespace {
-// from_chars rather than strtod: it neither depends on the locale nor raises floating-point
-// exceptions on overflow (the Debug tests trap those).
-bool parse_finite(const std::string& text, double* value) {
-  const char* begin = text.data();
-  const char* end = begin + text.size();
-  if (begin != end && *begin == '+') ++begin;
-  const auto [stop, ec] = std::from_chars(begin, end, *value);
-  return begin != end && ec == std::errc() && stop == end && std::isfinite(*value);
-}
-}  // namespace
-
-Motion read_motion_file(const std::string& path) {
-  namespace fs = std::filesystem;
-  std::error_code ec;
-  if (fs::is_directory(path, ec)) throw io::Error(path + ": is a directory, not a motion file");
-  std::ifstream in(path);
-  if (!in) throw io::Error(path + ": cannot open the motion file");
-  std::vector<std::array<double, 6>> rows;
-  std::string line;
-  int line_no = 0;
-  while (std::getline(in, line)) {
-    ++line_no;
-    if (const auto hash = line.find('#'); hash != std::string::npos) line.resize(hash);
-    std::istringstream words(line);
-    std::vector<std::string> tokens;
-    for (std::string w; words >> w;) tokens.push_back(w);
-    if (tokens.empty()) continue;
-    const std::string where = path + ": line " + std::to_string(line_no) + ": ";
-    if (tokens.size() != 6)
-      throw io::Error(where + "expected 6 numbers (ax ay az bx by bz), found " +
-                      std::to_string(tokens.size()));
-    std::array<double, 6> row{};
-    for (int k = 0; k < 6; ++k)
-      if (!parse_finite(tokens[k], &row[k]))
-        throw io::Error(where + "'" + tokens[k] + "' is not a finite number");
-    if (row[0] == row[3] && row[1] == row[4] && row[2] == row[5])
-      throw io::Error(where + "a and b coincide (the axis has no length)");
-    rows.push_back(row);
-  }
-  if (in.bad()) throw io::Error(path + ": read error");
+Motion parse_motion_text(const std::string& name, std::string_view text) {
+  const std::vector<io::AxisRow> rows = io::parse_axis_rows(name, text, /*commas=*/false);
   if (rows.size() < 4)
-    throw io::Error(path + ": " + std::to_string(rows.size()) +
+    throw io::Error(name + ": " + std::to_string(rows.size()) +
                     " control point rows; a cubic motion needs at least 4");
+  io::require_sweep(name, rows, "control point rows");
   Motion m;
   const int count = static_cast<int>(rows.size());
   m.knots = clamped_uniform_knots(count);
   m.a.resize(count, 3);
   m.b.resize(count, 3);
   for (int i = 0; i < count; ++i) {
-    m.a.row(i) << rows[i][0], rows[i][1], rows[i][2];
-    m.b.row(i) << rows[i][3], rows[i][4], rows[i][5];
+    m.a.row(i) = rows[i].a.transpose();
+    m.b.row(i) = rows[i].b.transpose();
   }
   return m;
+}
+
+Motion read_motion_file(const std::string& path) {
+  return parse_motion_text(path, io::read_regular_file(path, kMaxMotionFileBytes));
 }
 
 }  // namespace flank

@@ -1,0 +1,64 @@
+// One libFuzzer target per reader (FLANK_FUZZ_STL, _OBJ, _PLY, _LINES, _MOTION). Any input
+// must give either a result that keeps the reader's promises or io::Error with one printable
+// line naming the file; anything else (a crash, a sanitizer report, another exception, a
+// broken promise) is a finding.
+#include <cmath>
+#include <cstdint>
+#include <cstdlib>
+#include <string>
+#include <string_view>
+
+#include "io/read_lines.h"
+#include "io/read_mesh.h"
+#include "solver/synth.h"
+
+namespace {
+
+#if defined(FLANK_FUZZ_STL)
+const std::string kName = "fuzz.stl";
+#elif defined(FLANK_FUZZ_OBJ)
+const std::string kName = "fuzz.obj";
+#elif defined(FLANK_FUZZ_PLY)
+const std::string kName = "fuzz.ply";
+#else
+const std::string kName = "fuzz.txt";
+#endif
+
+void expect(bool promise) {
+  if (!promise) std::abort();
+}
+
+// What read_mesh promises the kernels (kernels/mesh.h): faces index existing vertices, no
+// face repeats a vertex, coordinates are finite, and something is left.
+void check(const flank::io::LoadedMesh& m) {
+  const flank::Mesh& mesh = m.mesh;
+  expect(mesh.face_count() > 0 && mesh.vertex_count() > 0);
+  expect(mesh.V.allFinite());
+  for (int f = 0; f < mesh.face_count(); ++f) {
+    for (int k = 0; k < 3; ++k) expect(mesh.F(f, k) >= 0 && mesh.F(f, k) < mesh.vertex_count());
+    expect(mesh.F(f, 0) != mesh.F(f, 1) && mesh.F(f, 1) != mesh.F(f, 2) && mesh.F(f, 0) != mesh.F(f, 2));
+  }
+  expect(m.report.input_faces == mesh.face_count() + m.report.degenerate_faces + m.report.duplicate_faces);
+}
+
+}  // namespace
+
+extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
+  const std::string_view bytes(reinterpret_cast<const char*>(data), size);
+  try {
+#if defined(FLANK_FUZZ_LINES)
+    for (const flank::io::AxisRow& row : flank::io::parse_lines_text(kName, bytes))
+      expect(row.a.allFinite() && row.b.allFinite() && row.a != row.b);
+#elif defined(FLANK_FUZZ_MOTION)
+    const flank::Motion m = flank::parse_motion_text(kName, bytes);
+    expect(m.count() >= 4 && m.a.allFinite() && m.b.allFinite());
+#else
+    check(flank::io::read_mesh_bytes(kName, bytes));
+#endif
+  } catch (const flank::io::Error& e) {
+    const std::string_view message = e.what();
+    expect(message.substr(0, kName.size() + 2) == kName + ": ");
+    for (const char c : message) expect(c >= 0x20 && c < 0x7f);
+  }
+  return 0;
+}
