@@ -64,20 +64,6 @@ Motion plate_sweep() {
   return motion_from(a, b);
 }
 
-// The true motion of the paper part as a motion of flank's own: clamped cubic B-splines with
-// `count` control points through 201 true rulings at their own parameters.
-Motion true_motion(int count) {
-  const AxisMotion truth = guide_motion(paper_guides(), kPaperToolLength);
-  std::vector<Line> rulings;
-  std::vector<double> params;
-  for (int i = 0; i <= 200; ++i) {
-    const double t = i / 200.0;
-    rulings.push_back({truth.a(t, 0), truth.b(t, 0)});
-    params.push_back(t);
-  }
-  return Motion::fit(rulings, count, params);
-}
-
 // ---------------------------------------------------------------------------------------------
 // The exact cone part
 
@@ -86,7 +72,7 @@ TEST(EvaluatePatch, TrueCutterOnTrueMotionIsWithinTheChordError) {
   ASSERT_EQ(part.invalid, 0);
   const SurfaceIndex index(part.mesh);
   const double diag = index.diagonal();
-  const Motion motion = true_motion(40);
+  const Motion motion = testing::true_motion(40);
   // How far the spline motion is from the true one (it is not polynomial).
   const AxisMotion truth = guide_motion(paper_guides(), kPaperToolLength);
   double motion_error = 0.0;
@@ -357,7 +343,7 @@ TEST(EvaluationGrid, SpacingBoundsTheGapBetweenAxisSamples) {
 // The same on a motion whose speed in t varies (the paper part's true motion, a few per cent):
 // rows sized by the path length alone gave gaps 2.9–5% above the spacing.
 TEST(EvaluationGrid, SpacingBoundsTheGapOnAMotionOfVaryingSpeed) {
-  expect_gap_bound(true_motion(40), "paper part");
+  expect_gap_bound(testing::true_motion(40), "paper part");
 }
 
 TEST(EvaluationGrid, TheProductStaysWithinTheBudget) {

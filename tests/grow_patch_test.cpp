@@ -234,20 +234,6 @@ TEST(RejectReason, HolderCollisionAndInvalidCutter) {
   EXPECT_NE(reject_reason(steep, wide).find("invalid"), std::string::npos) << reject_reason(steep, wide);
 }
 
-// The true motion of the cone part as a motion of flank's own (clamped cubic B-splines with
-// `count` control points through 201 true rulings).
-Motion true_motion(int count) {
-  const AxisMotion truth = guide_motion(paper_guides(), kPaperToolLength);
-  std::vector<Line> rulings;
-  std::vector<double> params;
-  for (int i = 0; i <= 200; ++i) {
-    const double t = i / 200.0;
-    rulings.push_back({truth.a(t, 0), truth.b(t, 0)});
-    params.push_back(t);
-  }
-  return Motion::fit(rulings, count, params);
-}
-
 // The reasons on patches measured on the exact cone part with its true motion: spheres half a
 // tolerance thinner than the true cone's leave material within tolerance (a good patch); a
 // tip sphere 3 tolerances thicker gouges 3 tolerances there while the rest of the cutter
@@ -257,7 +243,7 @@ TEST(RejectReason, TrueMotionWithCuttersOffTheTrueOne) {
   const SurfaceIndex index(part.mesh);
   const GrowOptions o = decompose_like(index.diagonal(), CutterKind::cone);
   const double tol = o.thresholds.tolerance;
-  const Motion motion = true_motion(40);
+  const Motion motion = testing::true_motion(40);
   EvaluateOptions eo = o.evaluate;
   eo.tolerance = tol;
   auto measure = [&](double tip, double end) {
@@ -333,7 +319,7 @@ TEST(FinishPatch, ConstantSplineOnTheCylinderPartBecomesTheCylinder) {
   const SurfaceIndex index(part.mesh);
   const double diag = index.diagonal();
   const GrowOptions go = decompose_like(diag, CutterKind::spline);
-  const Patch spline = evaluated(index, true_motion(16), Cutter::constant(CutterKind::spline, kPaperToolLength, 5.0), go);
+  const Patch spline = evaluated(index, testing::true_motion(16), Cutter::constant(CutterKind::spline, kPaperToolLength, 5.0), go);
   print("spline", spline, diag);
   ASSERT_EQ(reject_reason(spline, go), "");
 
@@ -365,7 +351,7 @@ TEST(FinishPatch, SplineOfAConeBecomesTheConeNotTheCylinder) {
   const Cutter cone = cone_from_end_radii(kPaperToolLength, 4.0, 7.0);
   std::vector<double> s(101), r(101);
   for (int k = 0; k <= 100; ++k) s[k] = k / 100.0, r[k] = cone.radius(s[k]);
-  const Patch spline = evaluated(index, true_motion(16), Cutter::fit(CutterKind::spline, kPaperToolLength, s, r), go);
+  const Patch spline = evaluated(index, testing::true_motion(16), Cutter::fit(CutterKind::spline, kPaperToolLength, s, r), go);
   ASSERT_EQ(reject_reason(spline, go), "");
   const FinishOptions fo = finish_like(go, diag, {CutterKind::cylinder, CutterKind::cone, CutterKind::barrel});
   const std::optional<Patch> simple = finish_patch(index, spline, fo);

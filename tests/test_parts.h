@@ -66,4 +66,18 @@ inline std::vector<Line> perturbed_axes(int count, double offset, double degrees
   return lines;
 }
 
+// The true motion of the paper part as a motion of flank's own: clamped cubic B-splines with
+// `count` control points through 201 true rulings at their own parameters.
+inline Motion true_motion(int count) {
+  const AxisMotion truth = guide_motion(paper_guides(), kPaperToolLength);
+  std::vector<Line> rulings;
+  std::vector<double> params;
+  for (int i = 0; i <= 200; ++i) {
+    const double t = i / 200.0;
+    rulings.push_back({truth.a(t, 0), truth.b(t, 0)});
+    params.push_back(t);
+  }
+  return Motion::fit(rulings, count, params);
+}
+
 }  // namespace flank::testing
