@@ -10,7 +10,7 @@
 #include "cli/commands.h"
 #include "cli/common.h"
 #include "io/read_mesh.h"
-#include "io/write.h"
+#include "report/write.h"
 #include "kernels/parallel.h"
 #include "solver/decompose.h"
 
@@ -90,7 +90,7 @@ int run_decompose(const DecomposeArgs& a) {
   const DecomposeResult r = decompose(index, o, [&](const std::string& s) { progress.stage(s); });
   const double total = progress.elapsed();
 
-  io::RunInfo run;
+  report::RunInfo run;
   run.input_path = a.mesh;
   run.vertices = lm.mesh.vertex_count();
   run.triangles = lm.mesh.face_count();

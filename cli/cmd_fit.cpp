@@ -8,7 +8,7 @@
 #include "cli/commands.h"
 #include "cli/common.h"
 #include "io/read_mesh.h"
-#include "io/write.h"
+#include "report/write.h"
 #include "kernels/parallel.h"
 #include "solver/evaluate_patch.h"
 #include "solver/propagate.h"
@@ -91,7 +91,7 @@ int run_fit(const FitArgs& a) {
                  std::to_string(radius_min) + ".." + std::to_string(radius_max) + " mm");
 
   Motion init;
-  std::vector<io::Setting> settings;
+  std::vector<report::Setting> settings;
   if (user_line) {
     const LineStart start = line_driven_start(index, *user_line, kind, a.control_points);
     progress.stage("line-driven start: best of " + std::to_string(start.refined.evaluated) +
@@ -152,7 +152,7 @@ int run_fit(const FitArgs& a) {
   progress.stage("evaluated: max |e| " + std::to_string(patch.error.max) + " mm, coverage " +
                  std::to_string(100.0 * patch.coverage_fraction) + "%");
 
-  io::RunInfo run;
+  report::RunInfo run;
   run.input_path = a.mesh;
   run.vertices = lm.mesh.vertex_count();
   run.triangles = lm.mesh.face_count();

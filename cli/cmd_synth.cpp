@@ -15,7 +15,8 @@
 #include "cli/common.h"
 #include "io/output_set.h"
 #include "io/read_mesh.h"
-#include "io/write.h"
+#include "io/read_lines.h"
+#include "io/write_mesh.h"
 #include "kernels/cutter.h"
 #include "kernels/mesh.h"
 #include "solver/synth.h"
@@ -158,7 +159,8 @@ void run_synth(const SynthArgs& args, bool length_given) {
     motion = guide_motion(paper_guides(), length);
     source = "guides " + args.guides;
   } else {
-    const Motion m = read_motion_file(args.motion_file);
+    io::ControlPoints rows = io::read_motion_file(args.motion_file);
+    const Motion m = Motion::from_control_points(std::move(rows.a), std::move(rows.b));
     // The sphere radii of a cone or barrel are laid out over the axis length; a motion file
     // carries its own axis, so its mean length is the default.
     if (!length_given) length = m.mean_length();

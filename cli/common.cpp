@@ -162,13 +162,13 @@ std::unique_ptr<io::OutputSet> open_outputs(const PatchArgs& a) {
       a.out_dir, std::vector<std::string>{"patches.json", "envelopes.ply", "design.ply", "toolpath.apt"});
 }
 
-void write_outputs(io::OutputSet& out, const PatchArgs& a, const io::RunInfo& run,
+void write_outputs(io::OutputSet& out, const PatchArgs& a, const report::RunInfo& run,
                    const std::vector<Patch>& patches, const Mesh& mesh,
                    const std::vector<int>& vertex_patch, double tolerance) {
-  io::write_patches_json(out.staged("patches.json"), run, patches);
-  io::write_envelopes_ply(out.staged("envelopes.ply"), patches, tolerance);
-  io::write_design_ply(out.staged("design.ply"), mesh, vertex_patch);
-  io::write_toolpath_apt(out.staged("toolpath.apt"), patches, a.apt_steps,
+  report::write_patches_json(out.staged("patches.json"), run, patches);
+  report::write_envelopes_ply(out.staged("envelopes.ply"), patches, tolerance);
+  report::write_design_ply(out.staged("design.ply"), mesh, vertex_patch);
+  report::write_toolpath_apt(out.staged("toolpath.apt"), patches, a.apt_steps,
                          std::filesystem::path(a.mesh).stem().string());
   out.commit();
 }

@@ -12,7 +12,7 @@
 
 #include "io/output_set.h"
 #include "io/read_mesh.h"
-#include "io/write.h"
+#include "report/write.h"
 #include "solver/motion.h"
 #include "solver/patch.h"
 
@@ -35,7 +35,7 @@ void add_patch_options(CLI::App* cmd, PatchArgs& a);
 std::unique_ptr<io::OutputSet> open_outputs(const PatchArgs& a);
 // patches.json, envelopes.ply, design.ply and toolpath.apt, written into `out` and moved into
 // place together: the earlier run's set is replaced all or nothing.
-void write_outputs(io::OutputSet& out, const PatchArgs& a, const io::RunInfo& run,
+void write_outputs(io::OutputSet& out, const PatchArgs& a, const report::RunInfo& run,
                    const std::vector<Patch>& patches, const Mesh& mesh,
                    const std::vector<int>& vertex_patch, double tolerance);
 

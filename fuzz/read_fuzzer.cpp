@@ -10,7 +10,6 @@
 
 #include "io/read_lines.h"
 #include "io/read_mesh.h"
-#include "solver/synth.h"
 
 namespace {
 
@@ -50,8 +49,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     for (const flank::io::AxisRow& row : flank::io::parse_lines_text(kName, bytes))
       expect(row.a.allFinite() && row.b.allFinite() && row.a != row.b);
 #elif defined(FLANK_FUZZ_MOTION)
-    const flank::Motion m = flank::parse_motion_text(kName, bytes);
-    expect(m.count() >= 4 && m.a.allFinite() && m.b.allFinite());
+    const flank::io::ControlPoints m = flank::io::parse_motion_text(kName, bytes);
+    expect(m.a.rows() >= 4 && m.a.rows() == m.b.rows() && m.a.allFinite() && m.b.allFinite());
 #else
     check(flank::io::read_mesh_bytes(kName, bytes));
 #endif

@@ -8,7 +8,7 @@
 #include <system_error>
 
 #include "io/read_mesh.h"
-#include "io/write.h"
+#include "io/write_mesh.h"
 
 namespace flank::io {
 

@@ -1,6 +1,5 @@
 // Reading input files (mesh, --lines, --motion): the whole file, its rows of six numbers, and
-// its bytes quoted in messages. Header-only, like io::Error, so that solver/synth.cpp, which
-// sits below io, reads --motion files with the same checks.
+// its bytes quoted in messages.
 #pragma once
 
 #include <fcntl.h>

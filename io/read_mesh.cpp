@@ -19,6 +19,7 @@
 #include <utility>
 #include <vector>
 
+#include "io/encode.h"
 #include "io/read_file.h"
 
 namespace flank::io {
@@ -913,13 +914,6 @@ LoadedMesh repair(const std::string& path, RawMesh raw, std::string format,
     }
   if (options.flip) mesh.F.col(1).swap(mesh.F.col(2));
   return out;
-}
-
-std::string lower_extension(const std::string& path) {
-  std::string ext = std::filesystem::path(path).extension().string();
-  for (char& c : ext)
-    if (c >= 'A' && c <= 'Z') c = static_cast<char>(c - 'A' + 'a');
-  return ext;
 }
 
 bool has_obj_vertex_line(std::string_view data) {

@@ -15,6 +15,15 @@ double Motion::mean_length(int samples) const {
   return sum / samples;
 }
 
+Motion Motion::from_control_points(Points a, Points b) {
+  assert(a.rows() >= 4 && a.rows() == b.rows());
+  Motion m;
+  m.knots = clamped_uniform_knots(static_cast<int>(a.rows()));
+  m.a = std::move(a);
+  m.b = std::move(b);
+  return m;
+}
+
 Motion Motion::fit(const std::vector<Line>& rulings, int count, std::vector<double> params) {
   assert(rulings.size() >= 2);
   const std::size_t n = rulings.size();

@@ -30,6 +30,8 @@ struct Motion {
   // Mean ruling length over the motion.
   double mean_length(int samples = 64) const;
 
+  // The motion with these control points (#K by 3 each, K ≥ 4) on uniform clamped knots.
+  static Motion from_control_points(Points a, Points b);
   // Least-squares motion with `count` control points through rulings at parameters
   // `params` (increasing, in [0, 1]); chord-length parameters when `params` is empty.
   static Motion fit(const std::vector<Line>& rulings, int count, std::vector<double> params = {});

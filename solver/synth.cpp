@@ -8,7 +8,6 @@
 #include <sstream>
 #include <vector>
 
-#include "io/read_file.h"  // header-only: io::Error, reading the --motion file
 #include "kernels/bspline.h"
 #include "kernels/envelope.h"
 #include "kernels/parallel.h"
@@ -340,28 +339,6 @@ SynthResult synth_envelope(const AxisMotion& motion, const ToolProfile& tool,
     result.invalid += row_bad[i];
   }
   return result;
-}
-
-Motion parse_motion_text(const std::string& name, std::string_view text) {
-  const std::vector<io::AxisRow> rows = io::parse_axis_rows(name, text, /*commas=*/false);
-  if (rows.size() < 4)
-    throw io::Error(name + ": " + std::to_string(rows.size()) +
-                    " control point rows; a cubic motion needs at least 4");
-  io::require_sweep(name, rows, "control point rows");
-  Motion m;
-  const int count = static_cast<int>(rows.size());
-  m.knots = clamped_uniform_knots(count);
-  m.a.resize(count, 3);
-  m.b.resize(count, 3);
-  for (int i = 0; i < count; ++i) {
-    m.a.row(i) = rows[i].a.transpose();
-    m.b.row(i) = rows[i].b.transpose();
-  }
-  return m;
-}
-
-Motion read_motion_file(const std::string& path) {
-  return parse_motion_text(path, io::read_regular_file(path, kMaxMotionFileBytes));
 }
 
 }  // namespace flank

@@ -99,13 +99,5 @@ struct SynthResult {
 SynthResult synth_envelope(const AxisMotion& motion, const ToolProfile& tool,
                            const SynthOptions& options = {});
 
-// A motion file: text, '#' starts a comment, one control point pair per row
-// "ax ay az bx by bz", at least 4 rows; uniform clamped cubic knots. Throws io::Error
-// ("PATH: problem") if not a regular file, unreadable or malformed.
-Motion read_motion_file(const std::string& path);
-// The same from the file's text; `name` stands for the path in messages (the fuzzers' entry).
-Motion parse_motion_text(const std::string& name, std::string_view text);
-// Control points, not a mesh: 16 MiB is some 250,000 rows.
-constexpr std::uint64_t kMaxMotionFileBytes = std::uint64_t{16} << 20;
 
 }  // namespace flank

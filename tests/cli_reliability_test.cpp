@@ -10,7 +10,7 @@
 
 #include "io/output_set.h"
 #include "io/read_mesh.h"
-#include "io/write.h"
+#include "io/write_mesh.h"
 #include "tests/cli_run.h"
 
 namespace {

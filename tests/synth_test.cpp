@@ -14,6 +14,7 @@
 #include <string>
 #include <tuple>
 
+#include "io/read_lines.h"
 #include "io/read_mesh.h"
 #include "kernels/bspline.h"
 #include "kernels/cutter.h"
@@ -365,10 +366,14 @@ class SynthMotionFile : public ::testing::Test {
     std::ofstream(path) << text;
     return path;
   }
+  static Motion read_motion(const std::string& path) {
+    io::ControlPoints rows = io::read_motion_file(path);
+    return Motion::from_control_points(std::move(rows.a), std::move(rows.b));
+  }
   // The io::Error message of read_motion_file, or "" if it did not throw.
   static std::string error_of(const std::string& path) {
     try {
-      read_motion_file(path);
+      io::read_motion_file(path);
     } catch (const io::Error& e) {
       return e.what();
     }
@@ -404,7 +409,7 @@ TEST_F(SynthMotionFile, Errors) {
 
   const std::string ok = write("ok.txt", "# a b\n\n" + good_rows + "  4 0 0 4 0 50 # last\n");
   EXPECT_EQ(error_of(ok), "");
-  const Motion m = read_motion_file(ok);
+  const Motion m = read_motion(ok);
   EXPECT_EQ(m.count(), 5);
   EXPECT_EQ(m.knots, clamped_uniform_knots(5));
 }
@@ -426,7 +431,7 @@ TEST_F(SynthMotionFile, SplineMotionRoundTrip) {
   text << std::setprecision(17) << "# fitted to Table 1\n";
   for (int k = 0; k < fitted.count(); ++k)
     text << fitted.a.row(k) << ' ' << fitted.b.row(k) << '\n';
-  const Motion read = read_motion_file(write("fitted.txt", text.str()));
+  const Motion read = read_motion(write("fitted.txt", text.str()));
   ASSERT_EQ(read.count(), fitted.count());
   EXPECT_EQ(read.knots, fitted.knots);
   EXPECT_EQ((read.a - fitted.a).norm(), 0.0);

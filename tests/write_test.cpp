@@ -1,7 +1,7 @@
 // io writers: meshes round-trip through read_mesh, patches.json keeps its keys in order and is
 // byte-deterministic, PLY colours follow the maps, APT has one GOTO per step, and writes are
 // atomic.
-#include "io/write.h"
+#include "report/write.h"
 
 #include <gtest/gtest.h>
 #include <unistd.h>
@@ -20,11 +20,18 @@
 #include <vector>
 
 #include "io/read_mesh.h"
+#include "io/write_mesh.h"
 #include "kernels/cutter.h"
 #include "solver/motion.h"
 
-namespace flank::io {
+namespace flank::report {
 namespace {
+
+using io::Error;
+using io::LoadedMesh;
+using io::read_mesh;
+using io::write_file_atomic;
+using io::write_mesh;
 
 namespace fs = std::filesystem;
 
@@ -353,4 +360,4 @@ TEST_F(Write, ToolpathAptHasOneGotoPerStep) {
 }
 
 }  // namespace
-}  // namespace flank::io
+}  // namespace flank::report

@@ -1,7 +1,7 @@
-// Writers: meshes, patches.json (flank-patches/1), envelopes.ply, design.ply, toolpath.apt.
+// Writers of results: patches.json (flank-patches/1), envelopes.ply, design.ply, toolpath.apt.
 // Every file goes through write_file_atomic; every byte is deterministic (fixed formats, no
 // locale-dependent or pointer-dependent output).
-#include "io/write.h"
+#include "report/write.h"
 
 #include <algorithm>
 #include <array>
@@ -14,106 +14,24 @@
 #include <nlohmann/json.hpp>
 #include <string>
 
+#include "io/encode.h"
 #include "io/read_mesh.h"
+#include "io/write_mesh.h"
 #include "kernels/cutter.h"
 
-namespace flank::io {
+namespace flank::report {
 namespace {
 
 namespace fs = std::filesystem;
+using io::Bytes;
+using io::Error;
+using io::fixed6;
+using io::shortest;
+using io::write_file_atomic;
 using Json = nlohmann::ordered_json;
 
 [[noreturn]] void fail(const fs::path& path, const std::string& problem) {
   throw Error(path.string() + ": " + problem);
-}
-
-std::string lower_extension(const fs::path& path) {
-  std::string ext = path.extension().string();
-  for (char& c : ext)
-    if (c >= 'A' && c <= 'Z') c = static_cast<char>(c - 'A' + 'a');
-  return ext;
-}
-
-// Little-endian binary output into a byte buffer.
-class Bytes {
- public:
-  void u8(std::uint8_t v) { data_.push_back(static_cast<char>(v)); }
-  void u16(std::uint16_t v) { le(v, 2); }
-  void u32(std::uint32_t v) { le(v, 4); }
-  void i32(std::int32_t v) { le(static_cast<std::uint32_t>(v), 4); }
-  void f32(double v) {
-    const float f = to_float(v);
-    std::uint32_t bits;
-    std::memcpy(&bits, &f, sizeof bits);
-    le(bits, 4);
-  }
-  void f64(double v) {
-    std::uint64_t bits;
-    std::memcpy(&bits, &v, sizeof bits);
-    le(bits, 8);
-  }
-  void text(const std::string& s) { data_ += s; }
-  const std::string& str() const { return data_; }
-
- private:
-  // Out-of-range values become ±inf without an overflow exception (Debug tests trap them).
-  static float to_float(double v) {
-    if (std::isnan(v)) return std::numeric_limits<float>::quiet_NaN();
-    if (std::abs(v) > std::numeric_limits<float>::max())
-      return v > 0 ? std::numeric_limits<float>::infinity() : -std::numeric_limits<float>::infinity();
-    return static_cast<float>(v);
-  }
-  void le(std::uint64_t v, int bytes) {
-    for (int k = 0; k < bytes; ++k) data_.push_back(static_cast<char>((v >> (8 * k)) & 0xffu));
-  }
-  std::string data_;
-};
-
-// Shortest text that reads back to the same double.
-std::string shortest(double v) {
-  char buffer[32];
-  const auto result = std::to_chars(buffer, buffer + sizeof buffer, v);
-  return std::string(buffer, result.ptr);
-}
-
-// "%.6f" without a negative zero, so that output does not depend on rounding noise.
-std::string fixed6(double v) {
-  char buffer[64];
-  std::snprintf(buffer, sizeof buffer, "%.6f", v);
-  if (std::strcmp(buffer, "-0.000000") == 0) return "0.000000";
-  return buffer;
-}
-
-Vec3 vertex(const Mesh& mesh, int f, int k) { return mesh.V.row(mesh.F(f, k)).transpose(); }
-
-void write_stl(std::ostream& out, const Mesh& mesh) {
-  Bytes b;
-  std::string header = "flank binary STL";  // must not start with "solid"
-  header.resize(80, ' ');
-  b.text(header);
-  b.u32(static_cast<std::uint32_t>(mesh.face_count()));
-  for (int f = 0; f < mesh.face_count(); ++f) {
-    const Vec3 p0 = vertex(mesh, f, 0), p1 = vertex(mesh, f, 1), p2 = vertex(mesh, f, 2);
-    Vec3 n = (p1 - p0).cross(p2 - p0);
-    const double length = n.norm();
-    n = length > 0 ? Vec3(n / length) : Vec3::Zero();
-    for (const Vec3& p : {n, p0, p1, p2})
-      for (int k = 0; k < 3; ++k) b.f32(p(k));
-    b.u16(0);
-  }
-  out << b.str();
-}
-
-void write_obj(std::ostream& out, const Mesh& mesh) {
-  std::string s = "# flank mesh: " + std::to_string(mesh.vertex_count()) + " vertices, " +
-                  std::to_string(mesh.face_count()) + " triangles\n";
-  for (int v = 0; v < mesh.vertex_count(); ++v)
-    s += "v " + shortest(mesh.V(v, 0)) + " " + shortest(mesh.V(v, 1)) + " " +
-         shortest(mesh.V(v, 2)) + "\n";
-  for (int f = 0; f < mesh.face_count(); ++f)
-    s += "f " + std::to_string(mesh.F(f, 0) + 1) + " " + std::to_string(mesh.F(f, 1) + 1) + " " +
-         std::to_string(mesh.F(f, 2) + 1) + "\n";
-  out << s;
 }
 
 void append_faces(Bytes& b, const Faces& F, int offset) {
@@ -121,18 +39,6 @@ void append_faces(Bytes& b, const Faces& F, int offset) {
     b.u8(3);
     for (int k = 0; k < 3; ++k) b.i32(F(f, k) + offset);
   }
-}
-
-void write_ply(std::ostream& out, const Mesh& mesh) {
-  Bytes b;
-  b.text("ply\nformat binary_little_endian 1.0\ncomment flank mesh\nelement vertex " +
-         std::to_string(mesh.vertex_count()) +
-         "\nproperty double x\nproperty double y\nproperty double z\nelement face " +
-         std::to_string(mesh.face_count()) + "\nproperty list uchar int vertex_indices\nend_header\n");
-  for (int v = 0; v < mesh.vertex_count(); ++v)
-    for (int k = 0; k < 3; ++k) b.f64(mesh.V(v, k));
-  append_faces(b, mesh.F, 0);
-  out << b.str();
 }
 
 Json number(double v) { return std::isfinite(v) ? Json(v) : Json(nullptr); }
@@ -250,13 +156,6 @@ constexpr std::array<std::array<std::uint8_t, 3>, 11> kPalette = {{{31, 119, 180
                                                                     {255, 187, 120}}};
 constexpr std::array<std::uint8_t, 3> kUncovered = {255, 0, 255};
 
-// One line of APT text: no control characters.
-std::string apt_text(const std::string& s) {
-  std::string out;
-  for (char c : s) out += (static_cast<unsigned char>(c) < 0x20 || c == 0x7f) ? ' ' : c;
-  return out;
-}
-
 void check_motion(const fs::path& path, const Patch& p) {
   const Motion& m = p.motion;
   if (m.count() < 4 || m.b.rows() != m.a.rows() ||
@@ -265,24 +164,11 @@ void check_motion(const fs::path& path, const Patch& p) {
                    std::to_string(m.count()) + " control points, " +
                    std::to_string(m.knots.size()) + " knots)");
   if (p.tip != 'a' && p.tip != 'b')
-    fail(path, "patch " + std::to_string(p.id) + " has tip '" + apt_text(std::string(1, p.tip)) +
+    fail(path, "patch " + std::to_string(p.id) + " has tip '" + io::one_line(std::string(1, p.tip)) +
                    "' (expected a or b)");
 }
 
 }  // namespace
-
-void write_mesh(const fs::path& path, const Mesh& mesh) {
-  const std::string ext = lower_extension(path);
-  if (ext == ".stl") {
-    write_file_atomic(path, [&](std::ostream& out) { write_stl(out, mesh); });
-  } else if (ext == ".obj") {
-    write_file_atomic(path, [&](std::ostream& out) { write_obj(out, mesh); });
-  } else if (ext == ".ply") {
-    write_file_atomic(path, [&](std::ostream& out) { write_ply(out, mesh); });
-  } else {
-    fail(path, "unsupported mesh extension '" + apt_text(ext) + "' (expected .stl, .obj or .ply)");
-  }
-}
 
 void write_patches_json(const fs::path& path, const RunInfo& run, const std::vector<Patch>& patches) {
   for (const Patch& p : patches) check_cutter(path, p);
@@ -388,7 +274,7 @@ void write_toolpath_apt(const fs::path& path, const std::vector<Patch>& patches,
                         int steps_per_patch, const std::string& part_name) {
   if (steps_per_patch < 1)
     fail(path, "steps per patch must be at least 1 (got " + std::to_string(steps_per_patch) + ")");
-  const std::string name = part_name.empty() ? std::string("FLANK") : apt_text(part_name);
+  const std::string name = part_name.empty() ? std::string("FLANK") : io::one_line(part_name);
   std::string s;
   s += "$$ flank toolpath - part " + name + ", " + std::to_string(patches.size()) + " patches\n";
   s += "$$ units mm; GOTO/x,y,z,i,j,k = tip point, unit tool axis toward the spindle\n";
@@ -443,4 +329,4 @@ void write_toolpath_apt(const fs::path& path, const std::vector<Patch>& patches,
   write_file_atomic(path, [&](std::ostream& out) { out << s; });
 }
 
-}  // namespace flank::io
+}  // namespace flank::report

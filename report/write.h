@@ -1,11 +1,9 @@
-// Writers for everything flank hands to a person or a machine. Every file is written to a
-// temporary name in the same folder and renamed into place, so a failure never leaves a
-// half-written output (DESIGN "Command line").
+// Writers of a run's results for a person or a machine: patches.json, envelopes.ply,
+// design.ply, toolpath.apt. Each goes through io::write_file_atomic, so a failure never leaves
+// a half-written output (DESIGN "Command line"); failures throw io::Error.
 #pragma once
 
 #include <filesystem>
-#include <functional>
-#include <ostream>
 #include <string>
 #include <variant>
 #include <vector>
@@ -13,12 +11,7 @@
 #include "kernels/mesh.h"
 #include "solver/patch.h"
 
-namespace flank::io {
-
-// Writes through `fill` into PATH.tmp-XXXX, flushes, renames onto `path`. Throws io::Error
-// (and removes the temporary) if anything fails.
-void write_file_atomic(const std::filesystem::path& path,
-                       const std::function<void(std::ostream&)>& fill);
+namespace flank::report {
 
 using SettingValue = std::variant<double, long long, bool, std::string, std::vector<double>>;
 struct Setting {
@@ -47,9 +40,6 @@ struct RunInfo {
   std::vector<std::pair<std::string, double>> timing_s;  // index, candidates, fit, cover, total
 };
 
-// A plain triangle mesh, format by extension: .stl (binary), .obj, .ply (binary little-endian).
-void write_mesh(const std::filesystem::path& path, const Mesh& mesh);
-
 // patches.json, format flank-patches/1 (DESIGN "Output").
 void write_patches_json(const std::filesystem::path& path, const RunInfo& run,
                         const std::vector<Patch>& patches);
@@ -67,4 +57,4 @@ void write_design_ply(const std::filesystem::path& path, const Mesh& mesh,
 void write_toolpath_apt(const std::filesystem::path& path, const std::vector<Patch>& patches,
                         int steps_per_patch, const std::string& part_name);
 
-}  // namespace flank::io
+}  // namespace flank::report
