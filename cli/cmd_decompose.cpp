@@ -72,11 +72,8 @@ int run_decompose(const DecomposeArgs& a) {
   const std::unique_ptr<io::OutputSet> out = open_outputs(a);  // checked before any work
 
   ThreadLimit limit(a.threads);
-  io::ReadOptions ro;
-  ro.flip = a.flip;
-  const io::LoadedMesh lm = io::read_mesh(a.mesh, ro);
-  progress.stage("read " + std::to_string(lm.mesh.vertex_count()) + " vertices, " +
-                 std::to_string(lm.mesh.face_count()) + " triangles");
+  const Design design = read_design(a, progress);
+  const io::LoadedMesh& lm = design.lm;
   const double t_index = progress.elapsed();
   const SurfaceIndex index(lm.mesh);
   const double index_s = progress.elapsed() - t_index;
@@ -114,6 +111,7 @@ int run_decompose(const DecomposeArgs& a) {
                   {"smoothed", r.smoothed},
                   {"flip", a.flip}};
   if (o.holder) run.settings.push_back({"holder", std::vector<double>{o.holder_length, o.holder_radius}});
+  add_design_settings(design, run.settings);
   run.tolerance = o.tolerance;
   run.coverage_fraction = r.coverage;
   // Area sums in a different order can leave -1e-11 mm^2 where nothing is left.
@@ -165,7 +163,7 @@ int run_decompose(const DecomposeArgs& a) {
               "cover %.2fs, finish %.2fs, total %.2fs\n",
               index_s, r.times.seeds, r.times.candidates, r.lines_scored, r.candidates, r.times.fit, r.grown,
               r.times.cover, r.times.finish, total);
-  std::printf("results in %s: patches.json envelopes.ply design.ply toolpath.apt\n", printable(a.out_dir).c_str());
+  std::printf("results in %s: patches.json envelopes.ply design.ply toolpath.apt patches.step tools.step\n", printable(a.out_dir).c_str());
   return 0;
 }
 

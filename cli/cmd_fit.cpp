@@ -71,11 +71,8 @@ int run_fit(const FitArgs& a) {
   resolve_tolerance(a.tolerance, a.tolerance_rel, 1.0);  // refuse bad values before any work
   const std::unique_ptr<io::OutputSet> out = open_outputs(a);  // checked before any work
   ThreadLimit limit(a.threads);
-  io::ReadOptions ro;
-  ro.flip = a.flip;
-  const io::LoadedMesh lm = io::read_mesh(a.mesh, ro);
-  progress.stage("read " + std::to_string(lm.mesh.vertex_count()) + " vertices, " +
-                 std::to_string(lm.mesh.face_count()) + " triangles");
+  const Design design = read_design(a, progress);
+  const io::LoadedMesh& lm = design.lm;
   const double t_index = progress.elapsed();
   const SurfaceIndex index(lm.mesh);
   const double index_s = progress.elapsed() - t_index;
@@ -168,6 +165,7 @@ int run_fit(const FitArgs& a) {
   if (holder) settings.push_back({"holder", std::vector<double>{holder->first, holder->second}});
   settings.push_back({"flip", a.flip});
   run.settings = settings;
+  add_design_settings(design, run.settings);
   run.tolerance = tol;
   run.coverage_fraction = patch.coverage_fraction;
   run.uncovered_area = total_area(lm.mesh) - patch.covered_area;
@@ -188,7 +186,7 @@ int run_fit(const FitArgs& a) {
   if (p.collision.checked)
     std::printf("  holder %s (min clearance %.4g mm)\n", p.collision.holder_clear ? "clear" : "COLLIDES",
                 p.collision.min_clearance);
-  std::printf("results in %s: patches.json envelopes.ply design.ply toolpath.apt\n", printable(a.out_dir).c_str());
+  std::printf("results in %s: patches.json envelopes.ply design.ply toolpath.apt patches.step tools.step\n", printable(a.out_dir).c_str());
   return 0;
 }
 

@@ -15,10 +15,12 @@
 #include "cli/common.h"
 #include "io/output_set.h"
 #include "io/read_mesh.h"
+#include "io/cad.h"
 #include "io/read_lines.h"
 #include "io/write_mesh.h"
 #include "kernels/cutter.h"
 #include "kernels/mesh.h"
+#include "report/write_step.h"
 #include "solver/synth.h"
 
 namespace flank::cli {
@@ -182,7 +184,37 @@ void run_synth(const SynthArgs& args, bool length_given) {
            "nothing written (check --tool, --length and the motion)";
     throw UsageError(msg.str());
   }
-  io::write_mesh(args.output, result.mesh);
+  std::string nurbs;
+  if (io::is_cad_path(args.output)) {
+    // The envelope as one B-spline face: fitted to the grid, its deviation measured against the
+    // exact envelope on a grid twice as fine (cell centres and edge midpoints included).
+    SynthOptions fine_options = options;
+    fine_options.rows = 2 * options.rows - 1;
+    fine_options.cols = 2 * options.cols - 1;
+    const SynthResult fine = synth_envelope(motion, tool, fine_options);
+    if (fine.invalid > 0 || fine.mesh.face_count() == 0)
+      throw UsageError("the envelope has no point at some parameters of the fine grid; nothing written");
+    Points grid = fine.mesh.V;
+    // The face's normal ∂u × ∂v must point toward the tool, as the mesh's triangles do.
+    const int fc = fine_options.cols;
+    const Vec3 du = fine.mesh.V.row(fc) - fine.mesh.V.row(0), dv = fine.mesh.V.row(1) - fine.mesh.V.row(0);
+    const Vec3 p0 = fine.mesh.V.row(fine.mesh.F(0, 0)), p1 = fine.mesh.V.row(fine.mesh.F(0, 1)),
+               p2 = fine.mesh.V.row(fine.mesh.F(0, 2));
+    if (du.cross(dv).dot((p1 - p0).cross(p2 - p0)) < 0)
+      for (int i = 0; i < fine_options.rows; ++i)
+        grid.middleRows(static_cast<Eigen::Index>(i) * fc, fc).colwise().reverseInPlace();
+    const double diagonal = bbox_diagonal(result.mesh);
+    const report::FittedSurface f =
+        report::fit_exact_grid(args.output, grid, options.rows, options.cols, 2e-7 * diagonal);
+    io::write_surfaces(args.output, {{"envelope", f.surface}});
+    std::ostringstream n;
+    n << "; B-spline face " << f.surface.poles_u() << "x" << f.surface.poles_v() << " poles, degree "
+      << f.surface.degree_u() << "x" << f.surface.degree_v() << ", max deviation from the exact envelope "
+      << f.deviation << " mm (" << f.deviation / diagonal << " of the diagonal)";
+    nurbs = n.str();
+  } else {
+    io::write_mesh(args.output, result.mesh);
+  }
 
   const double diagonal = bbox_diagonal(result.mesh);
   std::ostringstream out;
@@ -190,7 +222,7 @@ void run_synth(const SynthArgs& args, bool length_given) {
       << (options.side > 0 ? "+1" : "-1") << ", " << options.rows << "x" << options.cols
       << "): " << result.mesh.vertex_count() << " vertices, " << result.mesh.face_count()
       << " triangles, bbox diagonal " << diagonal << " mm, chord error " << result.chord_error
-      << " mm (" << (diagonal > 0 ? result.chord_error / diagonal : 0.0) << " of the diagonal)";
+      << " mm (" << (diagonal > 0 ? result.chord_error / diagonal : 0.0) << " of the diagonal)" << nurbs;
   std::cout << out.str() << std::endl;
 }
 
@@ -233,7 +265,7 @@ void register_synth(CLI::App& app, int* exit_code) {
                   "Which side of the tool path the machined surface lies on: +1 or -1 "
                   "(default +1)")
       ->type_name("+1|-1");
-  sub->add_option("-o,--output", args->output, "Output mesh (.stl, .obj or .ply)")
+  sub->add_option("-o,--output", args->output, "Output: a mesh (.stl, .obj, .ply) or one B-spline face (.step, .stp, .iges, .igs)")
       ->type_name("MESH")
       ->required();
   set_action(sub, exit_code, [args, length] {

@@ -3,6 +3,7 @@
 #include <CLI/CLI.hpp>
 #include <filesystem>
 
+#include <algorithm>
 #include <cctype>
 #include <cmath>
 #include <cstdlib>
@@ -10,6 +11,8 @@
 #include <fstream>
 #include <sstream>
 
+#include "io/cad.h"
+#include "report/write_step.h"
 #include "io/read_lines.h"
 
 namespace flank::cli {
@@ -141,9 +144,90 @@ double resolve_tolerance(std::optional<double> absolute, std::optional<double> r
   return r * diagonal;
 }
 
+std::vector<int> parse_faces(const std::string& text) {
+  std::vector<int> out;
+  std::string item;
+  std::istringstream items(text);
+  auto number = [&](const std::string& t) {
+    if (t.empty() || t.size() > 9 || !std::all_of(t.begin(), t.end(), [](char c) { return c >= '0' && c <= '9'; }))
+      throw UsageError("--faces: '" + t + "' is not a face index (1, 2, … as flank info lists them)");
+    const int v = std::stoi(t);
+    if (v < 1) throw UsageError("--faces: face indices start at 1");
+    return v;
+  };
+  while (std::getline(items, item, ',')) {
+    const std::size_t dash = item.find('-');
+    if (dash == std::string::npos) {
+      out.push_back(number(item));
+    } else {
+      const int lo = number(item.substr(0, dash)), hi = number(item.substr(dash + 1));
+      if (hi < lo || hi - lo > 1'000'000) throw UsageError("--faces: '" + item + "' is not a range LOW-HIGH");
+      for (int f = lo; f <= hi; ++f) out.push_back(f);
+    }
+  }
+  if (out.empty() || text.back() == ',') throw UsageError("--faces: an empty item in '" + text + "'");
+  std::sort(out.begin(), out.end());
+  out.erase(std::unique(out.begin(), out.end()), out.end());
+  return out;
+}
+
+Design read_design(const PatchArgs& a, Progress& progress) {
+  Design d;
+  io::ReadOptions ro;
+  ro.flip = a.flip;
+  if (!io::is_cad_path(a.mesh)) {
+    if (!a.faces.empty()) throw UsageError("--faces picks faces of a STEP or IGES file; " + a.mesh + " is a mesh");
+    d.lm = io::read_mesh(a.mesh, ro);
+    progress.stage("read " + std::to_string(d.lm.mesh.vertex_count()) + " vertices, " +
+                   std::to_string(d.lm.mesh.face_count()) + " triangles");
+    d.tolerance = resolve_tolerance(a.tolerance, a.tolerance_rel, bounding_box(d.lm.mesh).diagonal());
+    return d;
+  }
+  d.cad = true;
+  if (!a.faces.empty()) d.faces = parse_faces(a.faces);
+  const io::CadPart part = io::CadPart::read(a.mesh);
+  part.check_faces(d.faces);
+  if (d.faces.empty())
+    for (const io::CadFace& f : part.faces()) d.faces.push_back(f.index);
+  progress.stage("read " + part.format() + ": " + std::to_string(part.faces().size()) + " faces, using " +
+                 std::to_string(d.faces.size()));
+  // The tolerance follows the B-rep's diagonal; the tessellation asks for 9% of it, so that the
+  // tenth still holds against the (slightly smaller) diagonal of the mesh.
+  const double cad_tolerance = resolve_tolerance(a.tolerance, a.tolerance_rel, part.bounding_box(d.faces).diagonal());
+  d.chord_target = 0.09 * cad_tolerance;
+  io::CadTessellation t = part.tessellate(d.faces, d.chord_target, ro);
+  // OCCT's deflection is a target, not a bound: measured over a tenth of the tolerance, ask
+  // again for half (a few times at most; each halving roughly doubles the triangles).
+  for (int again = 0; again < 4 && !(t.deviation <= 0.1 * cad_tolerance); ++again) {
+    d.chord_target *= 0.5;
+    t = part.tessellate(d.faces, d.chord_target, ro);
+  }
+  if (!(t.deviation <= 0.1 * cad_tolerance))
+    throw io::Error(a.mesh + ": the tessellation's chord deviation stays at " + std::to_string(t.deviation) +
+                    " mm, over a tenth of the tolerance (" + std::to_string(0.1 * cad_tolerance) + " mm)");
+  d.lm = std::move(t.mesh);
+  d.chord_deviation = t.deviation;
+  d.tolerance = resolve_tolerance(a.tolerance, a.tolerance_rel, bounding_box(d.lm.mesh).diagonal());
+  progress.stage("tessellated " + std::to_string(t.faces) + " faces: " + std::to_string(d.lm.mesh.vertex_count()) +
+                 " vertices, " + std::to_string(d.lm.mesh.face_count()) + " triangles, chord deviation " +
+                 std::to_string(d.chord_deviation) + " mm");
+  return d;
+}
+
+void add_design_settings(const Design& d, std::vector<report::Setting>& settings) {
+  settings.push_back({"input_format", d.lm.report.format});
+  if (!d.cad) return;
+  std::vector<double> faces(d.faces.begin(), d.faces.end());
+  settings.push_back({"faces", faces});
+  settings.push_back({"chord_deviation", d.chord_deviation});
+  settings.push_back({"chord_deviation_target", d.chord_target});
+}
+
 void add_patch_options(CLI::App* cmd, PatchArgs& a) {
-  cmd->add_option("MESH", a.mesh, "Design surface: STL, OBJ or PLY")->required();
-  cmd->add_option("-o,--output", a.out_dir, "Folder for patches.json, envelopes.ply, design.ply, toolpath.apt")
+  cmd->add_option("MESH", a.mesh, "Design surface: STL, OBJ or PLY mesh, or STEP/IGES B-rep")->required();
+  cmd->add_option("--faces", a.faces,
+                  "STEP/IGES only: the faces to machine, by index as flank info lists them (e.g. 1,3,7-9; default all)");
+  cmd->add_option("-o,--output", a.out_dir, "Folder for patches.json, envelopes.ply, design.ply, toolpath.apt, patches.step, tools.step")
       ->required();
   cmd->add_option("--tolerance", a.tolerance, "Allowed error in mm");
   cmd->add_option("--tolerance-rel", a.tolerance_rel,
@@ -159,12 +243,15 @@ void add_patch_options(CLI::App* cmd, PatchArgs& a) {
 
 std::unique_ptr<io::OutputSet> open_outputs(const PatchArgs& a) {
   return std::make_unique<io::OutputSet>(
-      a.out_dir, std::vector<std::string>{"patches.json", "envelopes.ply", "design.ply", "toolpath.apt"});
+      a.out_dir, std::vector<std::string>{"patches.json", "envelopes.ply", "design.ply", "toolpath.apt",
+                                          "patches.step", "tools.step"});
 }
 
-void write_outputs(io::OutputSet& out, const PatchArgs& a, const report::RunInfo& run,
+void write_outputs(io::OutputSet& out, const PatchArgs& a, report::RunInfo run,
                    const std::vector<Patch>& patches, const Mesh& mesh,
                    const std::vector<int>& vertex_patch, double tolerance) {
+  run.nurbs_deviation = report::write_patches_step(out.staged("patches.step"), patches, tolerance);
+  report::write_tools_step(out.staged("tools.step"), patches);
   report::write_patches_json(out.staged("patches.json"), run, patches);
   report::write_envelopes_ply(out.staged("envelopes.ply"), patches, tolerance);
   report::write_design_ply(out.staged("design.ply"), mesh, vertex_patch);

@@ -22,20 +22,50 @@ class App;
 
 namespace flank::cli {
 
+// Progress on stderr: each stage line carries the elapsed time; silent with --quiet.
+class Progress {
+ public:
+  Progress(std::string command, bool quiet);
+  void stage(const std::string& what);
+  double elapsed() const;
+
+ private:
+  std::string command_;
+  bool quiet_;
+  std::chrono::steady_clock::time_point start_;
+};
+
 // Options every patch-producing command takes (fit, decompose).
 struct PatchArgs {
-  std::string mesh, out_dir, holder;
+  std::string mesh, out_dir, holder, faces;
   std::optional<double> tolerance, tolerance_rel;
   int threads = 0, apt_steps = 200;
   bool flip = false, quiet = false;
 };
 void add_patch_options(CLI::App* cmd, PatchArgs& a);
 
+// The design surface Φ: a mesh file as read, or the chosen faces of a STEP/IGES file sewn and
+// tessellated with a chord deviation under a tenth of the tolerance.
+struct Design {
+  io::LoadedMesh lm;
+  double tolerance = 0.0;        // resolved against the diagonal of what was read
+  bool cad = false;
+  std::vector<int> faces;        // CAD: the faces used (1-based), all when --faces is not given
+  double chord_deviation = 0.0;  // CAD: the largest chord deviation measured, mm
+  double chord_target = 0.0;     // CAD: the deviation asked of the tessellation, mm
+};
+Design read_design(const PatchArgs& a, Progress& progress);
+// --faces "1,3,7-9" → {1, 3, 7, 8, 9}; throws UsageError naming the option.
+std::vector<int> parse_faces(const std::string& text);
+// What the design adds to patches.json's settings: the input format and, for CAD, the faces
+// and the chord deviation.
+void add_design_settings(const Design& d, std::vector<report::Setting>& settings);
+
 // The output folder a.out_dir, checked and created before any work (io::OutputSet).
 std::unique_ptr<io::OutputSet> open_outputs(const PatchArgs& a);
-// patches.json, envelopes.ply, design.ply and toolpath.apt, written into `out` and moved into
+// patches.json, envelopes.ply, design.ply, toolpath.apt, patches.step and tools.step, written into `out` and moved into
 // place together: the earlier run's set is replaced all or nothing.
-void write_outputs(io::OutputSet& out, const PatchArgs& a, const report::RunInfo& run,
+void write_outputs(io::OutputSet& out, const PatchArgs& a, report::RunInfo run,
                    const std::vector<Patch>& patches, const Mesh& mesh,
                    const std::vector<int>& vertex_patch, double tolerance);
 
@@ -59,19 +89,6 @@ Line parse_line(const std::string& text, const std::string& option);
 std::pair<double, double> parse_pair(const std::string& text, const std::string& option);
 // The axes of a --lines file (io/read_lines.h); io::Error on unreadable or malformed files.
 std::vector<Line> read_lines_file(const std::string& path);
-
-// Progress on stderr: each stage line carries the elapsed time; silent with --quiet.
-class Progress {
- public:
-  Progress(std::string command, bool quiet);
-  void stage(const std::string& what);
-  double elapsed() const;
-
- private:
-  std::string command_;
-  bool quiet_;
-  std::chrono::steady_clock::time_point start_;
-};
 
 // Resolves --tolerance / --tolerance-rel against the diagonal (default 1e-4 × diagonal).
 double resolve_tolerance(std::optional<double> absolute, std::optional<double> relative,

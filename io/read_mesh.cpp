@@ -926,6 +926,19 @@ bool has_obj_vertex_line(std::string_view data) {
 
 }  // namespace
 
+LoadedMesh repair_triangles(const std::string& name, std::vector<double> xyz,
+                            std::vector<int> triangles, std::string format,
+                            const ReadOptions& options) {
+  const auto nv = static_cast<std::int64_t>(xyz.size() / 3);
+  for (const int v : triangles)
+    if (v < 0 || v >= nv) fail(name, "a triangle refers to vertex " + std::to_string(v) + " of " + std::to_string(nv));
+  for (std::size_t k = 0; k < xyz.size(); k += 3) check_coordinates(name, &xyz[k], "vertex " + std::to_string(k / 3));
+  RawMesh raw;
+  raw.xyz = std::move(xyz);
+  raw.triangles = std::move(triangles);
+  return repair(name, std::move(raw), std::move(format), options);
+}
+
 LoadedMesh read_mesh(const std::string& path, const ReadOptions& options) {
   return read_mesh_bytes(path, read_regular_file(path, kMaxMeshFileBytes), options);
 }

@@ -8,6 +8,7 @@
 #include <stdexcept>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include "kernels/mesh.h"
 
@@ -67,5 +68,12 @@ LoadedMesh read_mesh(const std::string& path, const ReadOptions& options = {});
 // picks the format as read_mesh's does (the fuzzers' entry point).
 LoadedMesh read_mesh_bytes(const std::string& name, std::string_view bytes,
                            const ReadOptions& options = {});
+
+// The same validation and repair from a triangle soup (3 coordinates per vertex, 3 indices per
+// triangle, indices in range): what the CAD reader makes of a tessellation. `format` is
+// reported as given.
+LoadedMesh repair_triangles(const std::string& name, std::vector<double> xyz,
+                            std::vector<int> triangles, std::string format,
+                            const ReadOptions& options = {});
 
 }  // namespace flank::io

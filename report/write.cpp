@@ -2,6 +2,7 @@
 // Every file goes through write_file_atomic; every byte is deterministic (fixed formats, no
 // locale-dependent or pointer-dependent output).
 #include "report/write.h"
+#include "report/write_step.h"
 
 #include <algorithm>
 #include <array>
@@ -12,6 +13,7 @@
 #include <cstring>
 #include <limits>
 #include <nlohmann/json.hpp>
+#include <numbers>
 #include <string>
 
 #include "io/encode.h"
@@ -168,6 +170,50 @@ void check_motion(const fs::path& path, const Patch& p) {
                    "' (expected a or b)");
 }
 
+// The real tool as a post-processor sees it, in the tool's own frame: w is the distance along
+// the unit axis from the tip-end axis point (a(t) for tip a, b(t) for tip b) toward the spindle.
+// Sphere s (centre at z = sL from a, radius d(s)) touches the tool's surface on the circle
+// z(s) = sL − d(s) d′(s)/L, r(s) = d √(1 − (d′/L)²) (Cutter::meridian), so the cutting surface
+// runs from z(0) to z(1), and the end face, where a machine expects the tool tip, is the circle
+// of the tip-end sphere: w = z(0) = −d(0) d′(0)/L for tip a, w = L − z(1) = d(1) d′(1)/L for
+// tip b. The CL point is the tip-end axis point + w_face · axis.
+//
+// CUTTER/ is the cone through the real profile's two end circles: the diameter at the end face
+// (APT's d), the flute length h and the CL point are then those of the real tool, exactly what
+// a tool setter measures and a machine positions, and only the side between the ends deviates
+// (by the barrel's bulge or the spline's waves). For a cylinder and a cone the meridian is that
+// line, so CUTTER/ is exact. A least-squares cone would lower the side's largest deviation (to
+// about two thirds for a symmetric barrel) but move the end-face diameter off the real tool.
+struct AptTool {
+  double face = 0.0;          // w of the end face (the CL point's offset along the axis)
+  double diameter = 0.0;      // APT d: the diameter at the end face
+  double taper = 0.0;         // APT beta in degrees, + when the tool widens toward the spindle
+  double flutes = 0.0;        // APT h: w(spindle end of the profile) − w(end face)
+  double inside = 0.0;        // max of (cone − real radius) at equal w: the real tool inside
+  double outside = 0.0;       // max of (real − cone radius) at equal w: the real tool outside
+};
+
+constexpr int kAptDeviationSamples = 1001;
+
+AptTool apt_tool(const Cutter& c, char tip) {
+  const Vec2 tip_end = c.meridian(tip == 'a' ? 0.0 : 1.0);
+  const Vec2 far_end = c.meridian(tip == 'a' ? 1.0 : 0.0);
+  const auto w = [&](const Vec2& m) { return tip == 'a' ? m(0) : c.length - m(0); };
+  AptTool t;
+  t.face = w(tip_end);
+  t.flutes = w(far_end) - t.face;
+  t.diameter = 2.0 * tip_end(1);
+  const double slope = (far_end(1) - tip_end(1)) / t.flutes;
+  t.taper = std::atan(slope) * 180.0 / std::numbers::pi;
+  for (int i = 0; i < kAptDeviationSamples; ++i) {
+    const Vec2 m = c.meridian(i / static_cast<double>(kAptDeviationSamples - 1));
+    const double deviation = m(1) - (tip_end(1) + slope * (w(m) - t.face));
+    t.outside = std::max(t.outside, deviation);
+    t.inside = std::max(t.inside, -deviation);
+  }
+  return t;
+}
+
 }  // namespace
 
 void write_patches_json(const fs::path& path, const RunInfo& run, const std::vector<Patch>& patches) {
@@ -196,7 +242,17 @@ void write_patches_json(const fs::path& path, const RunInfo& run, const std::vec
   for (const auto& [name, seconds] : run.timing_s) timing[name] = number(seconds);
   root["timing_s"] = std::move(timing);
   Json list = Json::array();
-  for (const Patch& p : patches) list.push_back(patch_json(p));
+  for (std::size_t k = 0; k < patches.size(); ++k) {
+    Json patch = patch_json(patches[k]);
+    // patches.step's B-spline face of this patch and its measured deviation from the exact Ω.
+    if (k < run.nurbs_deviation.size()) {
+      const bool written = std::isfinite(run.nurbs_deviation[k]);
+      patch["nurbs"] = Json{{"file", "patches.step"},
+                            {"face", written ? Json(face_name(patches[k])) : Json(nullptr)},
+                            {"max_deviation", number(run.nurbs_deviation[k])}};
+    }
+    list.push_back(std::move(patch));
+  }
   root["patches"] = std::move(list);
   // Invalid UTF-8 in a path or setting is replaced rather than thrown.
   const std::string text = root.dump(1, ' ', false, Json::error_handler_t::replace) + "\n";
@@ -277,7 +333,8 @@ void write_toolpath_apt(const fs::path& path, const std::vector<Patch>& patches,
   const std::string name = part_name.empty() ? std::string("FLANK") : io::one_line(part_name);
   std::string s;
   s += "$$ flank toolpath - part " + name + ", " + std::to_string(patches.size()) + " patches\n";
-  s += "$$ units mm; GOTO/x,y,z,i,j,k = tip point, unit tool axis toward the spindle\n";
+  s += "$$ units mm; GOTO/x,y,z,i,j,k = centre of the cutter's end face (CL point), unit tool axis "
+       "toward the spindle\n";
   s += "$$ no approach or retract moves between patches: the post-processor adds them\n";
   s += "PARTNO/" + name + "\n";
   s += "UNITS/MM\n";
@@ -286,31 +343,42 @@ void write_toolpath_apt(const fs::path& path, const std::vector<Patch>& patches,
     check_motion(path, p);
     const Cutter& c = p.cutter;
     const std::string id = std::to_string(p.id);
+    if (!(c.length > 0) || !std::isfinite(c.length))
+      fail(path, "patch " + id + " has a cutter of length " + fixed6(c.length));
+    const AptTool tool = apt_tool(c, p.tip);
+    if (!std::isfinite(tool.face) || !(tool.diameter > 0) || !(tool.flutes > 0) ||
+        !std::isfinite(tool.taper))
+      fail(path, "patch " + id + ": the cutter has no usable profile (end face at " +
+                     fixed6(tool.face) + ", diameter " + fixed6(tool.diameter) +
+                     ", flute length " + fixed6(tool.flutes) + ")");
     s += "$$ patch " + id + ": " + std::string(to_string(c.kind)) + " cutter, length " +
-         fixed6(c.length) + ", tip at " + p.tip + "(t)\n";
+         fixed6(c.length) + ", tip at " + p.tip + "(t), end face (CL point) " + fixed6(tool.face) +
+         " from " + p.tip + "(t) along the axis\n";
     s += "$$ sphere radii d(0)=" + fixed6(c.radius(0.0)) + ", d(0.5)=" + fixed6(c.radius(0.5)) +
          ", d(1)=" + fixed6(c.radius(1.0)) + "\n";
     std::string coefficients;
     for (Eigen::Index k = 0; k < c.coeffs.size(); ++k)
       coefficients += (k ? ", " : "") + fixed6(c.coeffs(k));
     s += "$$ coefficients: " + coefficients + "\n";
-    double max_r = 0.0;
     std::string meridian;
-    if (c.length > 0 && std::isfinite(c.length)) {
-      for (int i = 0; i < kRadiusSamples; ++i) {
-        const double r = c.meridian(i / static_cast<double>(kRadiusSamples - 1))(1);
-        if (std::isfinite(r)) max_r = std::max(max_r, r);
-      }
-      for (int i = 0; i <= 4; ++i) {
-        const Vec2 m = c.meridian(i / 4.0);
-        meridian += " (" + fixed6(m(0)) + ", " + fixed6(m(1)) + ")";
-      }
+    for (int i = 0; i <= 4; ++i) {
+      const Vec2 m = c.meridian(i / 4.0);
+      meridian += " (" + fixed6(m(0)) + ", " + fixed6(m(1)) + ")";
     }
     s += "$$ meridian (z from a, r):" + meridian + "\n";
     s += "$$ error max " + fixed6(p.error.max) + ", rms " + fixed6(p.error.rms) + ", max gouge " +
          fixed6(p.error.max_gouge) + "\n";
-    s += "CUTTER/" + fixed6(2.0 * max_r) + ",0.000000,0.000000,0.000000,0.000000,0.000000," +
-         fixed6(c.length) + "\n";
+    if (c.kind == CutterKind::barrel || c.kind == CutterKind::spline) {
+      s += "$$ patch " + id + ": CUTTER/ is the cone through the profile's end circles; the real " +
+           "profile deviates from it radially by up to " +
+           fixed6(std::max(tool.inside, tool.outside)) + " mm (outside by up to " +
+           fixed6(tool.outside) + ", inside by up to " + fixed6(tool.inside) + ")\n";
+      s += "$$ patch " + id + ": exact profile: tools.step solid P" + id +
+           "-tool, patches.json patches[" + std::to_string(&p - patches.data()) +
+           "].tool.profile (z from a, r)\n";
+    }
+    s += "CUTTER/" + fixed6(tool.diameter) + ",0.000000,0.000000,0.000000,0.000000," +
+         fixed6(tool.taper) + "," + fixed6(tool.flutes) + "\n";
     s += "MULTAX/ON\n";
     for (int i = 0; i <= steps_per_patch; ++i) {
       const double t = i / static_cast<double>(steps_per_patch);
@@ -321,7 +389,8 @@ void write_toolpath_apt(const fs::path& path, const std::vector<Patch>& patches,
       if (!tip.allFinite() || !std::isfinite(length) || !(length > 0))
         fail(path, "patch " + id + " has no tool axis at t = " + fixed6(t));
       const Vec3 axis = toward / length;
-      s += "GOTO/" + fixed6(tip(0)) + "," + fixed6(tip(1)) + "," + fixed6(tip(2)) + "," +
+      const Vec3 cl = tip + tool.face * axis;
+      s += "GOTO/" + fixed6(cl(0)) + "," + fixed6(cl(1)) + "," + fixed6(cl(2)) + "," +
            fixed6(axis(0)) + "," + fixed6(axis(1)) + "," + fixed6(axis(2)) + "\n";
     }
   }

@@ -38,6 +38,9 @@ struct RunInfo {
   };
   std::vector<Region> uncovered;
   std::vector<std::pair<std::string, double>> timing_s;  // index, candidates, fit, cover, total
+  // Per patch, in order: the deviation of its B-spline face in patches.step from the exact Ω
+  // (NaN: no face written); empty when no patches.step was written.
+  std::vector<double> nurbs_deviation;
 };
 
 // patches.json, format flank-patches/1 (DESIGN "Output").
@@ -52,8 +55,10 @@ void write_envelopes_ply(const std::filesystem::path& path, const std::vector<Pa
 void write_design_ply(const std::filesystem::path& path, const Mesh& mesh,
                       const std::vector<int>& vertex_patch);
 // toolpath.apt: APT CL data, one block per patch: a comment header with the cutter (kind,
-// length, radii, meridian), CUTTER/ with the nominal diameter and length, MULTAX/ON, then
-// one GOTO/x,y,z,i,j,k per step (tip position, unit axis toward the spindle), FINI.
+// length, radii, meridian), CUTTER/d,0,0,0,0,beta,h of the real tool (the cone through the
+// profile's end circles: exact for a cylinder or cone; for a barrel or spline, comments give
+// its deviation and where the exact profile is), MULTAX/ON, then one GOTO/x,y,z,i,j,k per step
+// (centre of the cutter's end face, unit axis toward the spindle), FINI.
 void write_toolpath_apt(const std::filesystem::path& path, const std::vector<Patch>& patches,
                         int steps_per_patch, const std::string& part_name);
 

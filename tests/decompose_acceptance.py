@@ -122,7 +122,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--flank", required=True)
     ap.add_argument("--work", help="keep the outputs here (default: a temporary folder)")
-    ap.add_argument("case", choices=["real", "spline", "noisy_barrel"])
+    ap.add_argument("case", choices=["real", "spline", "noisy_barrel", "cad"])
     ap.add_argument("args", nargs="*")
     a = ap.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:
@@ -145,6 +145,30 @@ def main(argv=None):
             data = decompose(a.flank, mesh, out, 1e-4)
             res = check_patches.check(os.path.join(out, "patches.json"), mesh)
             fails, summary = judge(data, res, 1, 0.95, max_patches=1)
+        elif a.case == "cad":
+            # The round trip of a designer's flank-millable face: an exact cone envelope written
+            # by synth as one B-spline face (STEP or IGES), read back by decompose, judged
+            # against the same envelope as a mesh.
+            if len(a.args) != 1 or a.args[0] not in ("step", "iges"):
+                ap.error("cad takes FORMAT (step or iges)")
+            cad = os.path.join(work, "cone." + ("step" if a.args[0] == "step" else "igs"))
+            mesh = os.path.join(work, "cone.stl")
+            for path in (cad, mesh):
+                run([a.flank, "synth", "--guides", "seed003", "--tool", "cone:4,7", "-o", path])
+            name = f"cone envelope through {a.args[0].upper()} at 1e-4"
+            data = decompose(a.flank, cad, out, 1e-4)
+            res = check_patches.check(os.path.join(out, "patches.json"), mesh)
+            fails, summary = judge(data, res, 1, 0.99, max_patches=1)
+            tol = res["tolerance"]
+            chord = data["settings"]["chord_deviation"]
+            if not chord <= 0.1 * tol:
+                fails.append(f"chord deviation {chord:.4g} > a tenth of the tolerance {tol:.4g}")
+            for p in data["patches"]:
+                dev = p["nurbs"]["max_deviation"]
+                if dev is None or not dev <= 0.01 * tol:
+                    fails.append(f"patch {p['id']}: patches.step deviates {dev} > 1% of the tolerance")
+            summary += (f"; chord deviation {chord / tol:.3f} tol; patches.step deviation "
+                        + " ".join(f"{p['nurbs']['max_deviation'] / tol:.4f}" for p in data["patches"]) + " tol")
         else:
             mesh = noisy_barrel(a.flank, work)
             name = "noisy barrel envelope with two holes at 3e-4"

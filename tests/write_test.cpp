@@ -1,19 +1,22 @@
 // io writers: meshes round-trip through read_mesh, patches.json keeps its keys in order and is
-// byte-deterministic, PLY colours follow the maps, APT has one GOTO per step, and writes are
-// atomic.
+// byte-deterministic, PLY colours follow the maps, APT has one GOTO per step at the cutter's
+// end-face centre and a CUTTER/ of the real tool, and writes are atomic.
 #include "report/write.h"
 
 #include <gtest/gtest.h>
 #include <unistd.h>
 
+#include <array>
 #include <cmath>
 #include <cstdint>
+#include <cstdlib>
 #include <cstdio>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <initializer_list>
 #include <limits>
+#include <numbers>
 #include <sstream>
 #include <stdexcept>
 #include <string>
@@ -103,6 +106,83 @@ Patch make_patch(int id, char tip, double x0) {
   p.envelope.error << -0.2, -0.05, 0.0, 0.1;
   p.envelope.rows = p.envelope.cols = 2;
   return p;
+}
+
+// One patch's block of toolpath.apt: the `$$` comments before its CUTTER/, the seven CUTTER/
+// parameters and the GOTO rows (x, y, z, i, j, k).
+struct AptBlock {
+  std::vector<std::string> comments;
+  std::vector<double> cutter;
+  std::vector<std::array<double, 6>> gotos;
+};
+
+std::vector<double> comma_numbers(const std::string& list) {
+  std::vector<double> out;
+  const char* at = list.c_str();
+  while (*at) {
+    char* stop = nullptr;
+    out.push_back(std::strtod(at, &stop));
+    at = *stop == ',' ? stop + 1 : stop;
+    if (stop == at && *at) break;  // not a number: stop rather than loop
+  }
+  return out;
+}
+
+std::vector<AptBlock> apt_blocks(const std::string& text) {
+  std::vector<AptBlock> blocks;
+  std::vector<std::string> comments;
+  std::istringstream in(text);
+  for (std::string line; std::getline(in, line);) {
+    if (line.rfind("$$", 0) == 0) {
+      comments.push_back(line);
+    } else if (line.rfind("CUTTER/", 0) == 0) {
+      blocks.push_back({comments, comma_numbers(line.substr(7)), {}});
+      comments.clear();
+    } else if (line.rfind("GOTO/", 0) == 0 && !blocks.empty()) {
+      const std::vector<double> v = comma_numbers(line.substr(5));
+      EXPECT_EQ(v.size(), 6u) << line;
+      if (v.size() == 6) blocks.back().gotos.push_back({v[0], v[1], v[2], v[3], v[4], v[5]});
+    }
+  }
+  return blocks;
+}
+
+bool mentions(const AptBlock& block, const std::string& what) {
+  for (const std::string& line : block.comments)
+    if (line.find(what) != std::string::npos) return true;
+  return false;
+}
+
+double degrees(double radians) { return radians * 180.0 / std::numbers::pi; }
+
+// A moving, turning axis of length 50 (so that the end face's offset shows in every coordinate).
+Motion turning_motion() {
+  std::vector<Line> lines;
+  for (int i = 0; i <= 10; ++i) {
+    const double angle = 0.05 * i;
+    const Vec3 a(2.0 * i, 0.3 * i * i, 1.0);
+    lines.push_back({a, a + 50.0 * Vec3(std::sin(angle), 0.2, std::cos(angle)).normalized()});
+  }
+  return Motion::fit(lines, 5);
+}
+
+Cutter barrel_cutter() {
+  Cutter c;
+  c.kind = CutterKind::barrel;
+  c.length = 50.0;
+  c.coeffs.resize(3);
+  c.coeffs << 5.0, 6.5, 5.5;
+  return c;
+}
+
+// The free-form profile of tests/decompose_acceptance.py's spline case.
+Cutter spline_cutter() {
+  Cutter c;
+  c.kind = CutterKind::spline;
+  c.length = 50.0;
+  c.coeffs.resize(kSplineProfileCoefficients);
+  c.coeffs << 5, 5.6, 6.4, 7, 6.6, 6, 6.3, 7.2, 8, 8.4;
+  return c;
 }
 
 class Write : public ::testing::Test {
@@ -334,19 +414,29 @@ TEST_F(Write, ToolpathAptHasOneGotoPerStep) {
   EXPECT_EQ(count_of(text, "\nGOTO/"), 2 * 41);
   EXPECT_EQ(count_of(text, "FINI"), 1);
   EXPECT_EQ(text.substr(text.size() - 5), "FINI\n");
-  // Tip a: from a(t) toward b(t); tip b: from b(t) toward a(t).
-  EXPECT_NE(text.find("\nGOTO/0.000000,0.000000,0.000000,0.000000,0.000000,1.000000\n"),
-            std::string::npos);
-  EXPECT_NE(text.find("\nGOTO/10.000000,0.000000,0.000000,0.000000,0.000000,1.000000\n"),
-            std::string::npos);
-  EXPECT_NE(text.find("\nGOTO/20.000000,0.000000,50.000000,0.000000,0.000000,-1.000000\n"),
-            std::string::npos);
-  double max_r = 0.0;
-  for (int i = 0; i <= 100; ++i) max_r = std::max(max_r, patches[0].cutter.meridian(i / 100.0)(1));
-  char cutter[128];
-  std::snprintf(cutter, sizeof cutter, "\nCUTTER/%.6f,0.000000,0.000000,0.000000,0.000000,0.000000,50.000000\n",
-                2 * max_r);
-  EXPECT_NE(text.find(cutter), std::string::npos);
+  // The cone r(z) = 4 + k z, k = 3/50, on axes along +z: sphere s touches it on the circle
+  // z(s) = sL − d d′/L, so the end face lies r_tip k/(1 + k²) beyond the tip-end sphere's
+  // centre, away from the spindle, and the flutes are L/(1 + k²) long. Tip a: from a(t) toward
+  // b(t), the end face below a(t); tip b: from b(t) toward a(t), the end face below b(t) too.
+  const double k = 3.0 / 50.0, shrink = 1.0 / (1.0 + k * k);
+  char line[160];
+  for (const double x : {0.0, 10.0}) {
+    std::snprintf(line, sizeof line, "\nGOTO/%.6f,0.000000,%.6f,0.000000,0.000000,1.000000\n", x,
+                  -4.0 * k * shrink);
+    EXPECT_NE(text.find(line), std::string::npos) << line;
+  }
+  std::snprintf(line, sizeof line, "\nGOTO/20.000000,0.000000,%.6f,0.000000,0.000000,-1.000000\n",
+                50.0 - 7.0 * k * shrink);
+  EXPECT_NE(text.find(line), std::string::npos) << line;
+  // CUTTER/d,r,e,f,alpha,beta,h: the diameter at the end face, widening toward the spindle for
+  // tip a and narrowing for tip b.
+  std::snprintf(line, sizeof line, "\nCUTTER/%.6f,0.000000,0.000000,0.000000,0.000000,%.6f,%.6f\n",
+                8.0 * shrink, degrees(std::atan(k)), 50.0 * shrink);
+  EXPECT_NE(text.find(line), std::string::npos) << line;
+  std::snprintf(line, sizeof line, "\nCUTTER/%.6f,0.000000,0.000000,0.000000,0.000000,%.6f,%.6f\n",
+                14.0 * shrink, -degrees(std::atan(k)), 50.0 * shrink);
+  EXPECT_NE(text.find(line), std::string::npos) << line;
+  EXPECT_EQ(text.find("tools.step"), std::string::npos);  // a cone is described exactly
   EXPECT_EQ(text.find("-0.000000"), std::string::npos);
 
   write_toolpath_apt(dir_ / "again.apt", patches, 40, "BLADE");
@@ -356,7 +446,134 @@ TEST_F(Write, ToolpathAptHasOneGotoPerStep) {
   std::vector<Patch> broken = patches;
   broken[1].motion = Motion();
   EXPECT_THROW(write_toolpath_apt(dir_ / "broken.apt", broken, 10, "BLADE"), Error);
+  broken = patches;
+  broken[0].cutter.length = 0.0;
+  EXPECT_THROW(write_toolpath_apt(dir_ / "broken.apt", broken, 10, "BLADE"), Error);
   EXPECT_EQ(entries(), 2);
+}
+
+// CUTTER/ of a cylinder and of cones both ways round: exactly the tool, taper positive when the
+// tool widens toward the spindle, whichever end of the axis the tip is at.
+TEST_F(Write, AptCutterIsExactForCylinderAndCone) {
+  const double k = 3.0 / 50.0, shrink = 1.0 / (1.0 + k * k), beta = degrees(std::atan(k));
+  const Cutter cylinder = Cutter::constant(CutterKind::cylinder, 50.0, 5.0);
+  struct Case {
+    const char* name;
+    Cutter cutter;
+    char tip;
+    std::array<double, 7> expected;  // d, r, e, f, alpha, beta, h
+    double face;                     // the end face's offset from the tip-end axis point
+  };
+  const std::vector<Case> cases = {
+      {"cylinder", cylinder, 'a', {10, 0, 0, 0, 0, 0, 50}, 0.0},
+      {"cylinder tip b", cylinder, 'b', {10, 0, 0, 0, 0, 0, 50}, 0.0},
+      {"cone widening", cone_from_end_radii(50.0, 4.0, 7.0), 'a',
+       {8 * shrink, 0, 0, 0, 0, beta, 50 * shrink}, -4 * k * shrink},
+      {"cone narrowing", cone_from_end_radii(50.0, 7.0, 4.0), 'a',
+       {14 * shrink, 0, 0, 0, 0, -beta, 50 * shrink}, 7 * k * shrink},
+      {"cone widening toward a, tip b", cone_from_end_radii(50.0, 7.0, 4.0), 'b',
+       {8 * shrink, 0, 0, 0, 0, beta, 50 * shrink}, -4 * k * shrink},
+      {"cone narrowing toward a, tip b", cone_from_end_radii(50.0, 4.0, 7.0), 'b',
+       {14 * shrink, 0, 0, 0, 0, -beta, 50 * shrink}, 7 * k * shrink},
+  };
+  for (const Case& c : cases) {
+    SCOPED_TRACE(c.name);
+    Patch p = make_patch(0, c.tip, 0.0);
+    p.cutter = c.cutter;
+    write_toolpath_apt(dir_ / "toolpath.apt", {p}, 10, "PART");
+    const std::vector<AptBlock> blocks = apt_blocks(slurp(dir_ / "toolpath.apt"));
+    ASSERT_EQ(blocks.size(), 1u);
+    ASSERT_EQ(blocks[0].cutter.size(), 7u);
+    for (int i = 0; i < 7; ++i) EXPECT_NEAR(blocks[0].cutter[i], c.expected[i], 1e-6) << i;
+    EXPECT_FALSE(mentions(blocks[0], "tools.step"));
+    // Axes along +z from a at z = 0 to b at z = 50; the CL point is the end face's centre.
+    ASSERT_EQ(blocks[0].gotos.size(), 11u);
+    for (int i = 0; i <= 10; ++i) {
+      const std::array<double, 6>& g = blocks[0].gotos[i];
+      const double direction = c.tip == 'a' ? 1.0 : -1.0;
+      EXPECT_NEAR(g[0], i, 1e-6);
+      EXPECT_NEAR(g[1], 0.0, 1e-6);
+      EXPECT_NEAR(g[2], (c.tip == 'a' ? 0.0 : 50.0) + direction * c.face, 1e-6);
+      EXPECT_NEAR(g[5], direction, 1e-6);
+    }
+  }
+}
+
+// Barrel and spline: the cone through the profile's end circles, with the deviation from the
+// real profile and where the exact profile is in comments.
+TEST_F(Write, AptCutterOfBarrelAndSplineIsTheConeThroughTheEnds) {
+  std::vector<Patch> patches = {make_patch(7, 'a', 0.0), make_patch(3, 'b', 20.0),
+                                make_patch(5, 'a', 40.0)};
+  patches[0].cutter = barrel_cutter();
+  patches[1].cutter = barrel_cutter();
+  patches[2].cutter = spline_cutter();
+  write_toolpath_apt(dir_ / "toolpath.apt", patches, 10, "PART");
+  const std::vector<AptBlock> blocks = apt_blocks(slurp(dir_ / "toolpath.apt"));
+  ASSERT_EQ(blocks.size(), 3u);
+  for (std::size_t i = 0; i < blocks.size(); ++i) {
+    const Cutter& c = patches[i].cutter;
+    const bool tip_a = patches[i].tip == 'a';
+    const std::string id = std::to_string(patches[i].id);
+    SCOPED_TRACE("patch " + id);
+    // The meridian (z from a, r) at the tip end and at the spindle end.
+    const Vec2 tip = c.meridian(tip_a ? 0.0 : 1.0), end = c.meridian(tip_a ? 1.0 : 0.0);
+    const double h = std::abs(end(0) - tip(0));
+    const double slope = (end(1) - tip(1)) / h;
+    ASSERT_EQ(blocks[i].cutter.size(), 7u);
+    const std::array<double, 7> expected = {2 * tip(1), 0, 0, 0, 0, degrees(std::atan(slope)), h};
+    for (int j = 0; j < 7; ++j) EXPECT_NEAR(blocks[i].cutter[j], expected[j], 1e-6) << j;
+    double deviation = 0.0;
+    for (int j = 0; j <= 20000; ++j) {
+      const Vec2 m = c.meridian(j / 20000.0);
+      const double from_tip = std::abs(m(0) - tip(0));
+      deviation = std::max(deviation, std::abs(m(1) - (tip(1) + slope * from_tip)));
+    }
+    EXPECT_GT(deviation, 0.1);
+    double written = -1.0;
+    for (const std::string& comment : blocks[i].comments) {
+      const std::size_t at = comment.find("radially by up to ");
+      if (comment.rfind("$$ patch " + id + ": ", 0) == 0 && at != std::string::npos)
+        written = std::strtod(comment.c_str() + at + 18, nullptr);
+    }
+    EXPECT_NEAR(written, deviation, 1e-5);
+    EXPECT_TRUE(mentions(blocks[i], "tools.step solid P" + id + "-tool"));
+    EXPECT_TRUE(
+        mentions(blocks[i], "patches.json patches[" + std::to_string(i) + "].tool.profile"));
+  }
+}
+
+// The CL point is the centre of the end face: on the axis, where the meridian starts at the tip
+// end, for a cutter whose end face is well off the axis end point, on a moving, turning axis.
+TEST_F(Write, AptClPointIsTheEndFaceCentre) {
+  for (const char tip : {'a', 'b'}) {
+    for (const Cutter& cutter : {barrel_cutter(), spline_cutter(), cone_from_end_radii(50, 3, 9)}) {
+      SCOPED_TRACE(std::string("tip ") + tip + ", " + std::string(to_string(cutter.kind)));
+      Patch p = make_patch(0, tip, 0.0);
+      p.motion = turning_motion();
+      p.cutter = cutter;
+      const int steps = 25;
+      write_toolpath_apt(dir_ / "toolpath.apt", {p}, steps, "PART");
+      const std::vector<AptBlock> blocks = apt_blocks(slurp(dir_ / "toolpath.apt"));
+      ASSERT_EQ(blocks.size(), 1u);
+      ASSERT_EQ(blocks[0].gotos.size(), static_cast<std::size_t>(steps + 1));
+      // Distance of the end face from the tip-end axis point toward the spindle, from the
+      // meridian (z from a): z(0) for tip a, L − z(1) for tip b.
+      const double face =
+          tip == 'a' ? cutter.meridian(0.0)(0) : cutter.length - cutter.meridian(1.0)(0);
+      EXPECT_GT(std::abs(face), 0.1);
+      for (int i = 0; i <= steps; ++i) {
+        const double t = i / static_cast<double>(steps);
+        const Vec3 a = p.motion.a_at(t), b = p.motion.b_at(t);
+        const Vec3 from = tip == 'a' ? a : b;
+        const Vec3 axis = (tip == 'a' ? Vec3(b - a) : Vec3(a - b)).normalized();
+        const std::array<double, 6>& g = blocks[0].gotos[i];
+        const Vec3 cl(g[0], g[1], g[2]), printed_axis(g[3], g[4], g[5]);
+        EXPECT_LT((printed_axis - axis).norm(), 2e-6) << i;
+        EXPECT_NEAR((cl - from).dot(axis), face, 2e-6) << i;
+        EXPECT_LT((cl - from - (cl - from).dot(axis) * axis).norm(), 2e-6) << i;  // on the axis
+      }
+    }
+  }
 }
 
 }  // namespace

@@ -1,0 +1,610 @@
+// Open CASCADE behind io/cad.h. Every OCCT exception becomes io::Error with the file's name;
+// OCCT's own console messages are switched off, so a bad file gives one line and nothing else.
+#include "io/cad.h"
+
+#include <BRepAdaptor_Surface.hxx>
+#include <BRepBndLib.hxx>
+#include <BRepBuilderAPI_MakeEdge.hxx>
+#include <BRepBuilderAPI_MakeFace.hxx>
+#include <BRepBuilderAPI_MakeVertex.hxx>
+#include <BRepExtrema_DistShapeShape.hxx>
+#include <BRepBuilderAPI_MakeWire.hxx>
+#include <BRepBuilderAPI_Sewing.hxx>
+#include <BRepGProp.hxx>
+#include <BRepMesh_IncrementalMesh.hxx>
+#include <BRepPrimAPI_MakeRevol.hxx>
+#include <BRep_Builder.hxx>
+#include <BRep_Tool.hxx>
+#include <Bnd_Box.hxx>
+#include <GProp_GProps.hxx>
+#include <GeomAPI_Interpolate.hxx>
+#include <GeomAPI_PointsToBSplineSurface.hxx>
+#include <Geom_BSplineSurface.hxx>
+#include <Geom_Surface.hxx>
+#include <IGESCAFControl_Reader.hxx>
+#include <IGESCAFControl_Writer.hxx>
+#include <IGESControl_Controller.hxx>
+#include <Interface_Static.hxx>
+#include <Message.hxx>
+#include <Message_Messenger.hxx>
+#include <Message_PrinterOStream.hxx>
+#include <Poly_Triangulation.hxx>
+#include <STEPCAFControl_Reader.hxx>
+#include <STEPCAFControl_Writer.hxx>
+#include <STEPControl_Controller.hxx>
+#include <Standard_Failure.hxx>
+#include <TColgp_Array2OfPnt.hxx>
+#include <TColgp_HArray1OfPnt.hxx>
+#include <TDF_Label.hxx>
+#include <TDF_LabelSequence.hxx>
+#include <TDataStd_Name.hxx>
+#include <TDocStd_Document.hxx>
+#include <TopExp.hxx>
+#include <TopExp_Explorer.hxx>
+#include <TopLoc_Location.hxx>
+#include <TopTools_IndexedMapOfShape.hxx>
+#include <TopoDS.hxx>
+#include <TopoDS_Compound.hxx>
+#include <TopoDS_Face.hxx>
+#include <XCAFApp_Application.hxx>
+#include <XCAFDoc_DocumentTool.hxx>
+#include <XCAFDoc_ShapeTool.hxx>
+#include <gp_Ax1.hxx>
+#include <gp_Pln.hxx>
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <mutex>
+#include <sstream>
+#include <unordered_map>
+
+#include "io/encode.h"
+#include "io/read_file.h"
+#include "io/write_mesh.h"
+
+namespace flank::io {
+
+namespace {
+
+namespace fs = std::filesystem;
+
+[[noreturn]] void fail(const std::string& name, const std::string& problem) {
+  throw Error(name + ": " + problem);
+}
+
+// OCCT reports through a global messenger that prints to stdout; flank's messages are its own.
+void quiet_occt() {
+  static std::once_flag once;
+  std::call_once(once, [] {
+    const Handle(Message_Messenger)& messenger = Message::DefaultMessenger();
+    messenger->RemovePrinters(STANDARD_TYPE(Message_PrinterOStream));
+    STEPControl_Controller::Init();
+    IGESControl_Controller::Init();
+  });
+}
+
+std::string what_of(const Standard_Failure& e) {
+  const char* message = e.GetMessageString();
+  std::string text = message && *message ? message : e.DynamicType()->Name();
+  return one_line(text);
+}
+
+// Runs an OCCT step; an OCCT exception becomes io::Error("NAME: doing: message").
+template <class F>
+auto guarded(const std::string& name, const std::string& doing, F&& f) {
+  try {
+    return f();
+  } catch (const Error&) {
+    throw;
+  } catch (const Standard_Failure& e) {
+    fail(name, doing + ": " + what_of(e));
+  } catch (const std::exception& e) {
+    fail(name, doing + ": " + one_line(e.what()));
+  }
+}
+
+Vec3 vec(const gp_Pnt& p) { return {p.X(), p.Y(), p.Z()}; }
+gp_Pnt pnt(const Vec3& p) { return {p.x(), p.y(), p.z()}; }
+
+std::string surface_kind(const TopoDS_Face& face) {
+  switch (BRepAdaptor_Surface(face).GetType()) {
+    case GeomAbs_Plane: return "plane";
+    case GeomAbs_Cylinder: return "cylinder";
+    case GeomAbs_Cone: return "cone";
+    case GeomAbs_Sphere: return "sphere";
+    case GeomAbs_Torus: return "torus";
+    case GeomAbs_BezierSurface: return "bezier";
+    case GeomAbs_BSplineSurface: return "bspline";
+    case GeomAbs_SurfaceOfRevolution: return "revolution";
+    case GeomAbs_SurfaceOfExtrusion: return "extrusion";
+    case GeomAbs_OffsetSurface: return "offset";
+    default: return "other";
+  }
+}
+
+Handle(TDocStd_Document) new_document() {
+  Handle(TDocStd_Document) doc;
+  XCAFApp_Application::GetApplication()->NewDocument("MDTV-XCAF", doc);
+  return doc;
+}
+
+std::string label_name(const TDF_Label& label) {
+  Handle(TDataStd_Name) name;
+  if (!label.FindAttribute(TDataStd_Name::GetID(), name)) return {};
+  const TCollection_ExtendedString& text = name->Get();
+  std::string out;
+  for (int k = 1; k <= text.Length(); ++k) {
+    const auto c = static_cast<unsigned>(text.Value(k));
+    out += c < 0x80 ? static_cast<char>(c) : '?';
+  }
+  return one_line(out);
+}
+
+}  // namespace
+
+bool is_cad_path(const std::string& path) {
+  const std::string ext = lower_extension(path);
+  return ext == ".step" || ext == ".stp" || ext == ".iges" || ext == ".igs";
+}
+
+struct CadPart::Impl {
+  std::string path;
+  std::string format;
+  TopoDS_Shape shape;
+  TopTools_IndexedMapOfShape face_map;  // 1-based
+  std::vector<CadFace> faces;
+  std::vector<std::string> names;  // per face, "" when unnamed
+};
+
+CadPart::CadPart(std::unique_ptr<Impl> impl) : impl_(std::move(impl)) {}
+CadPart::CadPart(CadPart&&) noexcept = default;
+CadPart& CadPart::operator=(CadPart&&) noexcept = default;
+CadPart::~CadPart() = default;
+
+CadPart CadPart::read(const std::string& path) {
+  quiet_occt();
+  // The same refusals as a mesh file (not regular, empty, too large) before OCCT sees it.
+  const std::string bytes = read_regular_file(path, kMaxCadFileBytes);
+  if (bytes.empty()) fail(path, "empty file");
+  auto impl = std::make_unique<Impl>();
+  impl->path = path;
+  const std::string ext = lower_extension(path);
+  const bool step = ext == ".step" || ext == ".stp";
+  impl->format = step ? "step" : "iges";
+  if (step && bytes.find("ISO-10303-21") == std::string::npos)
+    fail(path, "not a STEP file (no ISO-10303-21 header)");
+
+  Handle(TDocStd_Document) doc = new_document();
+  guarded(path, std::string("reading ") + (step ? "STEP" : "IGES"), [&] {
+    // Read, then transfer: a file OCCT parses but that holds no shape has no faces.
+    bool read = false, transferred = false;
+    if (step) {
+      STEPCAFControl_Reader reader;
+      reader.SetNameMode(true);
+      read = reader.ReadFile(path.c_str()) == IFSelect_RetDone;
+      transferred = read && reader.Transfer(doc);
+    } else {
+      IGESCAFControl_Reader reader;
+      reader.SetNameMode(true);
+      read = reader.ReadFile(path.c_str()) == IFSelect_RetDone;
+      transferred = read && reader.Transfer(doc);
+    }
+    if (!read) fail(path, std::string("not a readable ") + (step ? "STEP" : "IGES") + " file");
+    if (!transferred) fail(path, std::string("no faces in this ") + (step ? "STEP" : "IGES") + " file (no shape to read)");
+    return 0;
+  });
+
+  Handle(XCAFDoc_ShapeTool) shapes = XCAFDoc_DocumentTool::ShapeTool(doc->Main());
+  TDF_LabelSequence roots;
+  shapes->GetFreeShapes(roots);
+  TopoDS_Compound all;
+  BRep_Builder builder;
+  builder.MakeCompound(all);
+  std::vector<std::pair<TopoDS_Shape, std::string>> named;
+  for (int k = 1; k <= roots.Length(); ++k) {
+    const TopoDS_Shape s = XCAFDoc_ShapeTool::GetShape(roots.Value(k));
+    if (s.IsNull()) continue;
+    builder.Add(all, s);
+    named.emplace_back(s, label_name(roots.Value(k)));
+  }
+  impl->shape = all;
+  TopExp::MapShapes(all, TopAbs_FACE, impl->face_map);
+  const int n = impl->face_map.Extent();
+  if (n == 0) fail(path, std::string("no faces in this ") + (step ? "STEP" : "IGES") + " file");
+  impl->names.assign(static_cast<std::size_t>(n), "");
+  for (const auto& [s, name] : named)
+    for (TopExp_Explorer e(s, TopAbs_FACE); e.More(); e.Next()) {
+      const int index = impl->face_map.FindIndex(e.Current());
+      if (index > 0 && impl->names[index - 1].empty()) impl->names[index - 1] = name;
+    }
+  guarded(path, "measuring faces", [&] {
+    for (int i = 1; i <= n; ++i) {
+      const TopoDS_Face& face = TopoDS::Face(impl->face_map(i));
+      CadFace f;
+      f.index = i;
+      f.surface = surface_kind(face);
+      GProp_GProps props;
+      BRepGProp::SurfaceProperties(face, props);
+      f.area = props.Mass();
+      Bnd_Box box;
+      BRepBndLib::AddOptimal(face, box, /*useTriangulation=*/false, /*useShapeTolerance=*/false);
+      if (!box.IsVoid()) {
+        double x0, y0, z0, x1, y1, z1;
+        box.Get(x0, y0, z0, x1, y1, z1);
+        f.min = {x0, y0, z0};
+        f.max = {x1, y1, z1};
+      }
+      if (!f.min.allFinite() || !f.max.allFinite() || !std::isfinite(f.area))
+        fail(path, "face " + std::to_string(i) + " is unbounded or has non-finite geometry");
+      impl->faces.push_back(std::move(f));
+    }
+    return 0;
+  });
+  return CadPart(std::move(impl));
+}
+
+const std::string& CadPart::format() const { return impl_->format; }
+const std::vector<CadFace>& CadPart::faces() const { return impl_->faces; }
+
+void CadPart::check_faces(const std::vector<int>& faces) const {
+  const int n = static_cast<int>(impl_->faces.size());
+  for (const int f : faces)
+    if (f < 1 || f > n)
+      fail(impl_->path, "--faces: face " + std::to_string(f) + " does not exist (the file has faces 1.." +
+                            std::to_string(n) + ")");
+}
+
+BoundingBox CadPart::bounding_box(const std::vector<int>& faces) const {
+  check_faces(faces);
+  BoundingBox box;
+  bool first = true;
+  for (const CadFace& f : impl_->faces) {
+    if (!faces.empty() && std::find(faces.begin(), faces.end(), f.index) == faces.end()) continue;
+    box.min = first ? f.min : Vec3(box.min.cwiseMin(f.min));
+    box.max = first ? f.max : Vec3(box.max.cwiseMax(f.max));
+    first = false;
+  }
+  return box;
+}
+
+CadTessellation CadPart::tessellate(const std::vector<int>& faces, double deviation,
+                                    const ReadOptions& options) const {
+  check_faces(faces);
+  const std::string& path = impl_->path;
+  if (!(deviation > 0) || !std::isfinite(deviation)) fail(path, "the chord deviation must be a positive length");
+  std::vector<int> chosen = faces;
+  if (chosen.empty())
+    for (const CadFace& f : impl_->faces) chosen.push_back(f.index);
+  std::sort(chosen.begin(), chosen.end());
+  chosen.erase(std::unique(chosen.begin(), chosen.end()), chosen.end());
+  const double diagonal = bounding_box(chosen).diagonal();
+
+  CadTessellation out;
+  out.faces = static_cast<int>(chosen.size());
+  std::vector<double> xyz;
+  std::vector<int> triangles;
+  guarded(path, "tessellating", [&] {
+    // Sewn first, so that faces meeting along an edge share its points; a copy, the part
+    // itself stays as read.
+    BRepBuilderAPI_Sewing sewing(std::max(1e-6 * diagonal, 1e-7));
+    for (const int i : chosen) sewing.Add(impl_->face_map(i));
+    sewing.Perform();
+    TopoDS_Shape sewn = sewing.SewedShape();
+    if (sewn.IsNull()) fail(path, "sewing the faces gave no shape");
+    BRepMesh_IncrementalMesh mesher(sewn, deviation, /*isRelative=*/false, /*angle=*/0.5,
+                                    /*inParallel=*/false);
+    if (!mesher.IsDone()) fail(path, "tessellation failed");
+    for (TopExp_Explorer e(sewn, TopAbs_FACE); e.More(); e.Next()) {
+      const TopoDS_Face& face = TopoDS::Face(e.Current());
+      TopLoc_Location loc;
+      const Handle(Poly_Triangulation) tri = BRep_Tool::Triangulation(face, loc);
+      if (tri.IsNull()) continue;
+      const gp_Trsf trsf = loc.Transformation();
+      const int base = static_cast<int>(xyz.size() / 3);
+      for (int k = 1; k <= tri->NbNodes(); ++k) {
+        const gp_Pnt p = tri->Node(k).Transformed(trsf);
+        xyz.insert(xyz.end(), {p.X(), p.Y(), p.Z()});
+      }
+      const bool reversed = face.Orientation() == TopAbs_REVERSED;
+      BRepAdaptor_Surface surface(face);
+      for (int k = 1; k <= tri->NbTriangles(); ++k) {
+        int n1, n2, n3;
+        tri->Triangle(k).Get(n1, n2, n3);
+        if (reversed) std::swap(n2, n3);
+        triangles.insert(triangles.end(), {base + n1 - 1, base + n2 - 1, base + n3 - 1});
+        if (!tri->HasUVNodes()) continue;
+        // The chord deviation: the surface at the triangle's centre and edge midpoints (in
+        // the face's parameters) against the flat triangle there.
+        const int node[3] = {n1, n2, n3};
+        const double w[4][3] = {{1 / 3.0, 1 / 3.0, 1 / 3.0}, {0.5, 0.5, 0}, {0, 0.5, 0.5}, {0.5, 0, 0.5}};
+        for (const auto& wk : w) {
+          gp_XY uv(0, 0);
+          gp_XYZ flat(0, 0, 0);
+          for (int c = 0; c < 3; ++c) {
+            uv += wk[c] * tri->UVNode(node[c]).XY();
+            flat += wk[c] * tri->Node(node[c]).Transformed(trsf).XYZ();
+          }
+          const gp_Pnt on = surface.Value(uv.X(), uv.Y());
+          out.deviation = std::max(out.deviation, on.Distance(gp_Pnt(flat)));
+        }
+      }
+    }
+    return 0;
+  });
+  if (triangles.empty()) fail(path, "the chosen faces gave no triangles");
+
+  // Points of an edge shared by two faces may differ by rounding: snap each point onto the
+  // first one within 1e-7 of the diagonal, so that the mesh repair welds them.
+  const double snap = std::max(1e-7 * diagonal, 1e-12);
+  struct Key {
+    long long x, y, z;
+    bool operator==(const Key&) const = default;
+  };
+  struct KeyHash {
+    std::size_t operator()(const Key& k) const {
+      return std::hash<long long>()(k.x * 73856093LL ^ k.y * 19349663LL ^ k.z * 83492791LL);
+    }
+  };
+  std::unordered_map<Key, std::vector<int>, KeyHash> cells;
+  const std::size_t nv = xyz.size() / 3;
+  for (std::size_t v = 0; v < nv; ++v) {
+    const Key key{std::llround(xyz[3 * v] / snap), std::llround(xyz[3 * v + 1] / snap),
+                  std::llround(xyz[3 * v + 2] / snap)};
+    int found = -1;
+    for (long long dx = -1; dx <= 1 && found < 0; ++dx)
+      for (long long dy = -1; dy <= 1 && found < 0; ++dy)
+        for (long long dz = -1; dz <= 1 && found < 0; ++dz) {
+          const auto it = cells.find({key.x + dx, key.y + dy, key.z + dz});
+          if (it == cells.end()) continue;
+          for (const int u : it->second) {
+            const double d = std::hypot(xyz[3 * v] - xyz[3 * u], xyz[3 * v + 1] - xyz[3 * u + 1],
+                                        xyz[3 * v + 2] - xyz[3 * u + 2]);
+            if (d <= snap) {
+              found = u;
+              break;
+            }
+          }
+        }
+    if (found >= 0) {
+      for (int c = 0; c < 3; ++c) xyz[3 * v + c] = xyz[3 * static_cast<std::size_t>(found) + c];
+    } else {
+      cells[key].push_back(static_cast<int>(v));
+    }
+  }
+  out.mesh = repair_triangles(path, std::move(xyz), std::move(triangles), impl_->format, options);
+  return out;
+}
+
+Vec3 CadPart::face_point(int index, double u, double v) const {
+  check_faces({index});
+  return guarded(impl_->path, "evaluating face " + std::to_string(index), [&] {
+    const TopoDS_Face& face = TopoDS::Face(impl_->face_map(index));
+    const BRepAdaptor_Surface s(face, /*restriction=*/false);
+    const double u0 = s.FirstUParameter(), u1 = s.LastUParameter();
+    const double v0 = s.FirstVParameter(), v1 = s.LastVParameter();
+    return vec(s.Value(u0 + u * (u1 - u0), v0 + v * (v1 - v0)));
+  });
+}
+
+double CadPart::distance(const Vec3& p) const {
+  return guarded(impl_->path, "measuring a distance", [&] {
+    BRepExtrema_DistShapeShape d(BRepBuilderAPI_MakeVertex(pnt(p)).Vertex(), impl_->shape);
+    if (!d.IsDone() || d.NbSolution() == 0) fail(impl_->path, "no distance from a point to the faces");
+    return d.Value();
+  });
+}
+
+std::string CadPart::face_name(int index) const {
+  check_faces({index});
+  return impl_->names[static_cast<std::size_t>(index - 1)];
+}
+
+// ---------------------------------------------------------------------------------------
+// Writing
+
+struct SplineSurface::Impl {
+  Handle(Geom_BSplineSurface) surface;
+};
+
+SplineSurface::SplineSurface(std::shared_ptr<const Impl> impl) : impl_(std::move(impl)) {}
+SplineSurface::SplineSurface(const SplineSurface&) = default;
+SplineSurface& SplineSurface::operator=(const SplineSurface&) = default;
+SplineSurface::~SplineSurface() = default;
+
+SplineSurface SplineSurface::fit(const std::string& name, const Points& grid, int rows, int cols,
+                                 double tolerance) {
+  quiet_occt();
+  if (rows < 4 || cols < 4 || grid.rows() != static_cast<Eigen::Index>(rows) * cols || !grid.allFinite())
+    fail(name, "a B-spline surface needs a finite grid of at least 4 × 4 points");
+  return guarded(name, "fitting a B-spline surface", [&] {
+    TColgp_Array2OfPnt points(1, rows, 1, cols);
+    for (int i = 0; i < rows; ++i)
+      for (int j = 0; j < cols; ++j)
+        points.SetValue(i + 1, j + 1, pnt(grid.row(static_cast<Eigen::Index>(i) * cols + j).transpose()));
+    GeomAPI_PointsToBSplineSurface approx;
+    approx.Init(points, Approx_IsoParametric, 3, 8, GeomAbs_C2, tolerance);
+    if (!approx.IsDone() || approx.Surface().IsNull()) fail(name, "no B-spline surface within the tolerance");
+    auto impl = std::make_shared<Impl>();
+    impl->surface = approx.Surface();
+    return SplineSurface(std::move(impl));
+  });
+}
+
+Vec3 SplineSurface::point(double u, double v) const {
+  double u0, u1, v0, v1;
+  impl_->surface->Bounds(u0, u1, v0, v1);
+  return vec(impl_->surface->Value(u0 + u * (u1 - u0), v0 + v * (v1 - v0)));
+}
+int SplineSurface::poles_u() const { return impl_->surface->NbUPoles(); }
+int SplineSurface::poles_v() const { return impl_->surface->NbVPoles(); }
+int SplineSurface::degree_u() const { return impl_->surface->UDegree(); }
+int SplineSurface::degree_v() const { return impl_->surface->VDegree(); }
+
+struct CadWriter {
+  static const Handle(Geom_BSplineSurface)& surface(const SplineSurface& s) { return s.impl_->surface; }
+};
+
+namespace {
+
+// Writes the named shapes of `doc` as STEP or IGES (by extension) through a temporary file,
+// then moves the bytes into place with write_file_atomic.
+void write_document(const fs::path& path, const Handle(TDocStd_Document)& doc, bool empty) {
+  const std::string name = path.string();
+  const std::string ext = lower_extension(path);
+  const bool step = ext == ".step" || ext == ".stp";
+  if (!step && ext != ".iges" && ext != ".igs")
+    fail(name, "unsupported CAD extension '" + one_line(ext) + "' (expected .step, .stp, .iges or .igs)");
+  if (empty) {
+    // A run that found no patch still replaces the earlier run's file: a STEP file with an
+    // empty data section (OCCT writes no file without a shape). IGES has no such file.
+    if (!step) fail(name, "nothing to write");
+    write_file_atomic(path, [&](std::ostream& out) {
+      out << "ISO-10303-21;\nHEADER;\nFILE_DESCRIPTION(('flank: no shapes'),'2;1');\nFILE_NAME('"
+          << one_line(path.filename().string())
+          << "','1970-01-01T00:00:00',(''),(''),'flank','flank','');\n"
+             "FILE_SCHEMA(('AUTOMOTIVE_DESIGN { 1 0 10303 214 1 1 1 1 }'));\nENDSEC;\nDATA;\nENDSEC;\n"
+             "END-ISO-10303-21;\n";
+    });
+    return;
+  }
+  // OCCT writes to a path; the bytes go through our atomic writer so that the output set
+  // stays all or nothing. The scratch file is private (mkstemp) and removed.
+  std::string scratch_path =
+      (fs::temp_directory_path() / (step ? "flank-cad-XXXXXX.step" : "flank-cad-XXXXXX.igs")).string();
+  const int fd = mkstemps(scratch_path.data(), step ? 5 : 4);
+  if (fd < 0) fail(name, "cannot create a scratch file in " + fs::temp_directory_path().string());
+  ::close(fd);
+  struct Remove {
+    std::string p;
+    ~Remove() { std::remove(p.c_str()); }
+  } remove{scratch_path};
+  guarded(name, std::string("writing ") + (step ? "STEP" : "IGES"), [&] {
+    bool done = false;
+    if (step) {
+      Interface_Static::SetCVal("write.step.schema", "AP214IS");
+      Interface_Static::SetCVal("write.step.unit", "MM");
+      STEPCAFControl_Writer writer;
+      writer.SetNameMode(true);
+      done = writer.Transfer(doc, STEPControl_AsIs) && writer.Write(scratch_path.c_str()) == IFSelect_RetDone;
+    } else {
+      Interface_Static::SetCVal("write.iges.unit", "MM");
+      Interface_Static::SetIVal("write.iges.brep.mode", 1);
+      IGESCAFControl_Writer writer;
+      writer.SetNameMode(true);
+      done = writer.Transfer(doc) && writer.Write(scratch_path.c_str());
+    }
+    if (!done) fail(name, "OCCT could not write the file");
+    return 0;
+  });
+  std::ifstream in(scratch_path, std::ios::binary);
+  std::ostringstream bytes;
+  bytes << in.rdbuf();
+  if (!in) fail(name, "cannot read back the scratch file");
+  std::string text = bytes.str();
+  // Headers carry the scratch file's name and the time of writing: the output's own name and
+  // a fixed stamp keep the bytes deterministic.
+  if (step) {
+    const std::size_t at = text.find("FILE_NAME(");
+    const std::size_t q1 = at == std::string::npos ? at : text.find('\'', at);
+    const std::size_t q2 = q1 == std::string::npos ? q1 : text.find('\'', q1 + 1);
+    const std::size_t q3 = q2 == std::string::npos ? q2 : text.find('\'', q2 + 1);
+    const std::size_t q4 = q3 == std::string::npos ? q3 : text.find('\'', q3 + 1);
+    if (q4 != std::string::npos) {
+      text.replace(q3, q4 - q3 + 1, "'1970-01-01T00:00:00'");
+      text.replace(q1, q2 - q1 + 1, "'" + one_line(path.filename().string()) + "'");
+    }
+  } else {
+    // The global section (column 73 'G') holds the file name and two dates "15HYYYYMMDD.HHNNSS".
+    std::size_t line = 0;
+    while (line < text.size()) {
+      std::size_t end = text.find('\n', line);
+      if (end == std::string::npos) end = text.size();
+      if (end - line >= 73 && text[line + 72] == 'G') {
+        for (std::size_t at = text.find("15H", line); at != std::string::npos && at + 18 <= end;
+             at = text.find("15H", at + 3)) {
+          const std::string stamp = text.substr(at + 3, 15);
+          if (stamp.size() == 15 && stamp[8] == '.' &&
+              std::all_of(stamp.begin(), stamp.begin() + 8, [](char c) { return c >= '0' && c <= '9'; }))
+            text.replace(at + 3, 15, "19700101.000000");
+        }
+        const std::size_t scratch_at = text.find(scratch_path, line);
+        if (scratch_at != std::string::npos && scratch_at < end) fail(name, "IGES header names the scratch file");
+      }
+      line = end + 1;
+    }
+  }
+  write_file_atomic(path, [&](std::ostream& out) { out << text; });
+}
+
+void add_named(const Handle(TDocStd_Document)& doc, const TopoDS_Shape& shape, const std::string& name) {
+  Handle(XCAFDoc_ShapeTool) shapes = XCAFDoc_DocumentTool::ShapeTool(doc->Main());
+  const TDF_Label label = shapes->AddShape(shape, /*makeAssembly=*/false);
+  TDataStd_Name::Set(label, TCollection_ExtendedString(name.c_str()));
+}
+
+}  // namespace
+
+void write_surfaces(const fs::path& path, const std::vector<NamedSurface>& surfaces) {
+  quiet_occt();
+  const std::string name = path.string();
+  Handle(TDocStd_Document) doc = new_document();
+  guarded(name, "building faces", [&] {
+    for (const NamedSurface& s : surfaces) {
+      BRepBuilderAPI_MakeFace face(CadWriter::surface(s.surface), 1e-7);
+      if (!face.IsDone()) fail(name, "cannot make a face of surface '" + one_line(s.name) + "'");
+      add_named(doc, face.Face(), s.name);
+    }
+    return 0;
+  });
+  write_document(path, doc, surfaces.empty());
+}
+
+void write_solids(const fs::path& path, const std::vector<RevolvedSolid>& solids) {
+  quiet_occt();
+  const std::string name = path.string();
+  Handle(TDocStd_Document) doc = new_document();
+  guarded(name, "building solids", [&] {
+    for (const RevolvedSolid& s : solids) {
+      const auto n = s.meridian.size();
+      if (n < 2) fail(name, "solid '" + one_line(s.name) + "' has fewer than 2 meridian points");
+      for (std::size_t k = 0; k < n; ++k) {
+        if (!s.meridian[k].allFinite() || s.meridian[k].y() <= 0 ||
+            (k > 0 && !(s.meridian[k].x() > s.meridian[k - 1].x())))
+          fail(name, "solid '" + one_line(s.name) + "': meridian point " + std::to_string(k) +
+                         " is not finite, not off the axis, or not past the previous one");
+      }
+      const Vec3 axis = s.axis.normalized();
+      // A unit vector normal to the axis: the meridian's radial direction.
+      Vec3 radial = axis.unitOrthogonal();
+      auto at = [&](double x, double r) { return pnt(s.origin + x * axis + r * radial); };
+      // The side: an interpolating cubic through the meridian points (exact for a line).
+      Handle(TColgp_HArray1OfPnt) side = new TColgp_HArray1OfPnt(1, static_cast<int>(n));
+      for (std::size_t k = 0; k < n; ++k) side->SetValue(static_cast<int>(k + 1), at(s.meridian[k].x(), s.meridian[k].y()));
+      GeomAPI_Interpolate interpolate(side, /*periodic=*/false, 1e-9);
+      interpolate.Perform();
+      if (!interpolate.IsDone()) fail(name, "solid '" + one_line(s.name) + "': cannot interpolate the meridian");
+      const gp_Pnt tip_axis = at(s.meridian.front().x(), 0), end_axis = at(s.meridian.back().x(), 0);
+      BRepBuilderAPI_MakeWire wire;
+      wire.Add(BRepBuilderAPI_MakeEdge(tip_axis, side->Value(1)).Edge());
+      wire.Add(BRepBuilderAPI_MakeEdge(interpolate.Curve()).Edge());
+      wire.Add(BRepBuilderAPI_MakeEdge(side->Value(static_cast<int>(n)), end_axis).Edge());
+      wire.Add(BRepBuilderAPI_MakeEdge(end_axis, tip_axis).Edge());
+      if (!wire.IsDone()) fail(name, "solid '" + one_line(s.name) + "': the meridian does not close");
+      BRepBuilderAPI_MakeFace profile(wire.Wire(), /*onlyPlane=*/true);
+      if (!profile.IsDone()) fail(name, "solid '" + one_line(s.name) + "': the meridian is not planar");
+      BRepPrimAPI_MakeRevol revol(profile.Face(), gp_Ax1(pnt(s.origin), gp_Dir(axis.x(), axis.y(), axis.z())));
+      revol.Build();
+      if (!revol.IsDone()) fail(name, "solid '" + one_line(s.name) + "': the revolution failed");
+      add_named(doc, revol.Shape(), s.name);
+    }
+    return 0;
+  });
+  write_document(path, doc, solids.empty());
+}
+
+}  // namespace flank::io

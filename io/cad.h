@@ -1,0 +1,116 @@
+// CAD files through Open CASCADE, kept out of this header: STEP and IGES B-rep parts read,
+// their faces listed and tessellated into one sewn mesh; B-spline surfaces fitted to grids of
+// points and written as named STEP or IGES faces; solids of revolution written as STEP.
+#pragma once
+
+#include <cstdint>
+#include <filesystem>
+#include <memory>
+#include <string>
+#include <vector>
+
+#include "io/read_mesh.h"
+#include "kernels/mesh.h"
+#include "kernels/types.h"
+
+namespace flank::io {
+
+// .step, .stp, .iges, .igs (any case).
+bool is_cad_path(const std::string& path);
+
+// A STEP or IGES file is read whole by OCCT; 1 GiB is far beyond any single part.
+constexpr std::uint64_t kMaxCadFileBytes = std::uint64_t{1} << 30;
+
+struct CadFace {
+  int index = 0;        // 1-based, in the order the file's shape lists its faces
+  std::string surface;  // plane, cylinder, cone, sphere, torus, bezier, bspline, revolution, extrusion, offset, other
+  double area = 0.0;    // mm²
+  Vec3 min = Vec3::Zero(), max = Vec3::Zero();  // bounding box
+};
+
+struct CadTessellation {
+  LoadedMesh mesh;         // validated and repaired as a mesh file is (format "step"/"iges")
+  double deviation = 0.0;  // the largest chord deviation measured: mesh to B-rep faces, mm
+  int faces = 0;           // faces tessellated
+};
+
+// A B-rep part: the faces of a STEP or IGES file.
+class CadPart {
+ public:
+  // Throws io::Error("PATH: problem") for what read_mesh refuses (not a regular file, empty,
+  // too large) and for files OCCT cannot read or that hold no face.
+  static CadPart read(const std::string& path);
+  CadPart(CadPart&&) noexcept;
+  CadPart& operator=(CadPart&&) noexcept;
+  ~CadPart();
+
+  const std::string& format() const;  // "step" or "iges"
+  const std::vector<CadFace>& faces() const;
+  // Throws io::Error naming the face when an index is out of range; all faces when empty.
+  void check_faces(const std::vector<int>& faces) const;
+  BoundingBox bounding_box(const std::vector<int>& faces) const;
+  // The chosen faces (all when empty) sewn and tessellated with a chord deviation of at most
+  // `deviation` mm.
+  CadTessellation tessellate(const std::vector<int>& faces, double deviation,
+                             const ReadOptions& options = {}) const;
+  // Face `index` (1-based) evaluated at normalised parameters (u, v) ∈ [0, 1]² of its
+  // surface's natural bounds (the tests read a written B-spline face back this way).
+  Vec3 face_point(int index, double u, double v) const;
+  // The distance from `p` to the nearest of the file's faces (all of them), mm.
+  double distance(const Vec3& p) const;
+  // The name a STEP face carries in the file, or "" (IGES: always "").
+  std::string face_name(int index) const;
+
+ private:
+  struct Impl;
+  explicit CadPart(std::unique_ptr<Impl> impl);
+  std::unique_ptr<Impl> impl_;
+};
+
+// A B-spline surface approximating a grid: `grid` holds rows × cols points, row-major, rows
+// along u and columns along v, point (i, j) at parameters (i / (rows − 1), j / (cols − 1)).
+class SplineSurface {
+ public:
+  // Cubic (up to quintic where needed), C2, approximating every grid point within `tolerance`.
+  // Throws io::Error(`name`: problem) if OCCT cannot fit it.
+  static SplineSurface fit(const std::string& name, const Points& grid, int rows, int cols,
+                           double tolerance);
+  SplineSurface(const SplineSurface&);
+  SplineSurface& operator=(const SplineSurface&);
+  ~SplineSurface();
+
+  Vec3 point(double u, double v) const;  // (u, v) ∈ [0, 1]²
+  int poles_u() const;
+  int poles_v() const;
+  int degree_u() const;
+  int degree_v() const;
+
+ private:
+  struct Impl;
+  explicit SplineSurface(std::shared_ptr<const Impl> impl);
+  std::shared_ptr<const Impl> impl_;
+  friend struct CadWriter;
+};
+
+struct NamedSurface {
+  std::string name;
+  SplineSurface surface;
+};
+// One face per surface, named, in a STEP (AP214) or IGES (5.3) file by extension. The surface
+// normal is ∂u × ∂v. Written through write_file_atomic; no surfaces give a STEP file with an
+// empty data section.
+void write_surfaces(const std::filesystem::path& path, const std::vector<NamedSurface>& surfaces);
+
+// A solid of revolution: the meridian (axial position, radius ≥ 0), axial positions strictly
+// increasing, closed by flat ends on the axis and revolved about `axis` through `origin`
+// (axial position 0 at `origin`, growing along `axis`).
+struct RevolvedSolid {
+  std::string name;
+  std::vector<Vec2> meridian;
+  Vec3 origin = Vec3::Zero();
+  Vec3 axis = Vec3::UnitZ();
+};
+// The solids in one STEP (AP214) file, each a named product (none: an empty data section).
+void write_solids(const std::filesystem::path& path, const std::vector<RevolvedSolid>& solids);
+
+}  // namespace flank::io
