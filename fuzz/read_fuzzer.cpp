@@ -1,4 +1,4 @@
-// One libFuzzer target per reader (FLANK_FUZZ_STL, _OBJ, _PLY, _LINES, _MOTION). Any input
+// One libFuzzer target per reader (FLANK_FUZZ_STL, _OBJ, _PLY, _LINES, _MOTION, _STEP, _IGES). Any input
 // must give either a result that keeps the reader's promises or io::Error with one printable
 // line naming the file; anything else (a crash, a sanitizer report, another exception, a
 // broken promise) is a finding.
@@ -8,6 +8,12 @@
 #include <string>
 #include <string_view>
 
+#include <unistd.h>
+
+#include <filesystem>
+#include <fstream>
+
+#include "io/cad.h"
 #include "io/read_lines.h"
 #include "io/read_mesh.h"
 
@@ -19,6 +25,16 @@ const std::string kName = "fuzz.stl";
 const std::string kName = "fuzz.obj";
 #elif defined(FLANK_FUZZ_PLY)
 const std::string kName = "fuzz.ply";
+#elif defined(FLANK_FUZZ_STEP) || defined(FLANK_FUZZ_IGES)
+// OCCT reads from a path: each input goes to this file (one per process, in the temp folder).
+const std::string kName = (std::filesystem::temp_directory_path() /
+                           ("flank-fuzz-" + std::to_string(::getpid()) +
+#if defined(FLANK_FUZZ_STEP)
+                            ".step"
+#else
+                            ".igs"
+#endif
+                            )).string();
 #else
 const std::string kName = "fuzz.txt";
 #endif
@@ -48,6 +64,19 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
 #if defined(FLANK_FUZZ_LINES)
     for (const flank::io::AxisRow& row : flank::io::parse_lines_text(kName, bytes))
       expect(row.a.allFinite() && row.b.allFinite() && row.a != row.b);
+#elif defined(FLANK_FUZZ_STEP) || defined(FLANK_FUZZ_IGES)
+    {
+      std::ofstream out(kName, std::ios::binary | std::ios::trunc);
+      out.write(bytes.data(), static_cast<std::streamsize>(bytes.size()));
+    }
+    // Within the fuzzer's 10 s per input: a slower read is refused, not a finding.
+    const flank::io::CadPart part = flank::io::CadPart::read(kName, 5.0);
+    expect(!part.faces().empty());
+    // Tessellate what a small part would be (a bounded amount of work): the mesh must keep
+    // read_mesh's promises too.
+    const flank::BoundingBox box = part.bounding_box({});
+    if (part.faces().size() <= 8 && box.diagonal() > 1e-6 && box.diagonal() < 1e6)
+      check(part.tessellate({}, 1e-2 * box.diagonal()).mesh);
 #elif defined(FLANK_FUZZ_MOTION)
     const flank::io::ControlPoints m = flank::io::parse_motion_text(kName, bytes);
     expect(m.a.rows() >= 4 && m.a.rows() == m.b.rows() && m.a.allFinite() && m.b.allFinite());

@@ -52,9 +52,16 @@
 #include <gp_Ax1.hxx>
 #include <gp_Pln.hxx>
 
+#include <fcntl.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include <algorithm>
+#include <chrono>
+#include <thread>
+#include <cerrno>
+#include <csignal>
+#include <functional>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
@@ -127,11 +134,21 @@ std::string surface_kind(const TopoDS_Face& face) {
   }
 }
 
-Handle(TDocStd_Document) new_document() {
-  Handle(TDocStd_Document) doc;
-  XCAFApp_Application::GetApplication()->NewDocument("MDTV-XCAF", doc);
-  return doc;
-}
+// An XCAF document, closed when it goes out of scope: the application keeps every open
+// document (and its shapes) alive until it is closed.
+class Document {
+ public:
+  Document() { XCAFApp_Application::GetApplication()->NewDocument("MDTV-XCAF", doc_); }
+  ~Document() {
+    if (!doc_.IsNull() && doc_->IsOpened()) XCAFApp_Application::GetApplication()->Close(doc_);
+  }
+  Document(const Document&) = delete;
+  Document& operator=(const Document&) = delete;
+  Handle(TDocStd_Document)& get() { return doc_; }
+
+ private:
+  Handle(TDocStd_Document) doc_;
+};
 
 std::string label_name(const TDF_Label& label) {
   Handle(TDataStd_Name) name;
@@ -166,9 +183,75 @@ CadPart::CadPart(CadPart&&) noexcept = default;
 CadPart& CadPart::operator=(CadPart&&) noexcept = default;
 CadPart::~CadPart() = default;
 
-CadPart CadPart::read(const std::string& path) {
+namespace {
+
+enum class ChildEnd { finished, crashed, timed_out };
+
+// Runs `work` in a child process: how it ended. The child's output goes to /dev/null and it
+// dies by the default action of a fatal signal, whatever handlers (a sanitizer's, a fuzzer's)
+// the parent installed; after `seconds` it is killed.
+ChildEnd run_in_child(const std::function<void()>& work, double seconds) {
+  std::fflush(nullptr);
+  const pid_t pid = ::fork();
+  if (pid < 0) return ChildEnd::finished;  // no child to spare: read in this process as without the probe
+  if (pid == 0) {
+    for (const int sig : {SIGSEGV, SIGBUS, SIGABRT, SIGFPE, SIGILL}) std::signal(sig, SIG_DFL);
+    const int null = ::open("/dev/null", O_WRONLY);
+    if (null >= 0) {
+      ::dup2(null, STDOUT_FILENO);
+      ::dup2(null, STDERR_FILENO);
+    }
+    try {
+      work();
+    } catch (...) {
+      ::_exit(1);
+    }
+    ::_exit(0);
+  }
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::duration<double>(seconds);
+  int status = 0;
+  for (;;) {
+    const pid_t done = ::waitpid(pid, &status, WNOHANG);
+    if (done == pid) return WIFSIGNALED(status) ? ChildEnd::crashed : ChildEnd::finished;
+    if (done < 0 && errno != EINTR) return ChildEnd::finished;
+    if (std::chrono::steady_clock::now() > deadline) {
+      ::kill(pid, SIGKILL);
+      while (::waitpid(pid, &status, 0) < 0 && errno == EINTR) {
+      }
+      return ChildEnd::timed_out;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  }
+}
+
+}  // namespace
+
+// Open CASCADE's STEP and IGES translators dereference null handles on some malformed files
+// (the fuzzer found a STEP whose cartesian point refers to nothing: a SEGV inside
+// StepGeom_CartesianPoint). They are not flank's code to fix, and a crash must never be the
+// answer to a bad file: the file is first read, and its faces coarsely tessellated, in a child
+// process; only if that child survives is it read here. Reading twice costs the time of a read.
+CadPart CadPart::read(const std::string& path, double probe_seconds) {
   quiet_occt();
   // The same refusals as a mesh file (not regular, empty, too large) before OCCT sees it.
+  const std::string bytes = read_regular_file(path, kMaxCadFileBytes);
+  // OCCT's readers trust counts in the file (an IGES edge list of a billion edges from a 6 KB
+  // file), so the probe also has a time limit: by default a minute plus 10 s per MB.
+  if (!(probe_seconds > 0)) probe_seconds = 60.0 + 10.0 * static_cast<double>(bytes.size()) / (1 << 20);
+  const ChildEnd end = run_in_child([&] {
+    const CadPart probe(read_in_process(path));
+    const BoundingBox box = probe.bounding_box({});
+    if (box.diagonal() > 0 && std::isfinite(box.diagonal())) probe.tessellate({}, 1e-2 * box.diagonal());
+  }, probe_seconds);
+  if (end == ChildEnd::crashed)
+    fail(path, "Open CASCADE crashed reading this file: it is malformed, or holds entities OCCT cannot read");
+  if (end == ChildEnd::timed_out)
+    fail(path, "Open CASCADE did not finish reading this file in " + std::to_string(std::lround(probe_seconds)) +
+                   " s: it is malformed (counts far beyond its size), or too large to read");
+  return CadPart(read_in_process(path));
+}
+
+std::unique_ptr<CadPart::Impl> CadPart::read_in_process(const std::string& path) {
   const std::string bytes = read_regular_file(path, kMaxCadFileBytes);
   if (bytes.empty()) fail(path, "empty file");
   auto impl = std::make_unique<Impl>();
@@ -179,7 +262,8 @@ CadPart CadPart::read(const std::string& path) {
   if (step && bytes.find("ISO-10303-21") == std::string::npos)
     fail(path, "not a STEP file (no ISO-10303-21 header)");
 
-  Handle(TDocStd_Document) doc = new_document();
+  Document document;
+  Handle(TDocStd_Document)& doc = document.get();
   guarded(path, std::string("reading ") + (step ? "STEP" : "IGES"), [&] {
     // Read, then transfer: a file OCCT parses but that holds no shape has no faces.
     bool read = false, transferred = false;
@@ -245,7 +329,7 @@ CadPart CadPart::read(const std::string& path) {
     }
     return 0;
   });
-  return CadPart(std::move(impl));
+  return impl;
 }
 
 const std::string& CadPart::format() const { return impl_->format; }
@@ -552,7 +636,8 @@ void add_named(const Handle(TDocStd_Document)& doc, const TopoDS_Shape& shape, c
 void write_surfaces(const fs::path& path, const std::vector<NamedSurface>& surfaces) {
   quiet_occt();
   const std::string name = path.string();
-  Handle(TDocStd_Document) doc = new_document();
+  Document document;
+  Handle(TDocStd_Document)& doc = document.get();
   guarded(name, "building faces", [&] {
     for (const NamedSurface& s : surfaces) {
       BRepBuilderAPI_MakeFace face(CadWriter::surface(s.surface), 1e-7);
@@ -567,7 +652,8 @@ void write_surfaces(const fs::path& path, const std::vector<NamedSurface>& surfa
 void write_solids(const fs::path& path, const std::vector<RevolvedSolid>& solids) {
   quiet_occt();
   const std::string name = path.string();
-  Handle(TDocStd_Document) doc = new_document();
+  Document document;
+  Handle(TDocStd_Document)& doc = document.get();
   guarded(name, "building solids", [&] {
     for (const RevolvedSolid& s : solids) {
       const auto n = s.meridian.size();

@@ -38,8 +38,10 @@ struct CadTessellation {
 class CadPart {
  public:
   // Throws io::Error("PATH: problem") for what read_mesh refuses (not a regular file, empty,
-  // too large) and for files OCCT cannot read or that hold no face.
-  static CadPart read(const std::string& path);
+  // too large) and for files OCCT cannot read, crashes on (tried first in a child process),
+  // or that hold no face. The trial read in a child is killed after `probe_seconds` (0: a
+  // minute plus 10 s per MB of file).
+  static CadPart read(const std::string& path, double probe_seconds = 0);
   CadPart(CadPart&&) noexcept;
   CadPart& operator=(CadPart&&) noexcept;
   ~CadPart();
@@ -64,6 +66,7 @@ class CadPart {
  private:
   struct Impl;
   explicit CadPart(std::unique_ptr<Impl> impl);
+  static std::unique_ptr<Impl> read_in_process(const std::string& path);
   std::unique_ptr<Impl> impl_;
 };
 

@@ -161,6 +161,26 @@ TEST_F(CadIo, BadFilesAreRefusedInOneLine) {
   EXPECT_NE(message.find("cannot open"), std::string::npos) << message;
 }
 
+// Files that make Open CASCADE itself crash (a STEP point referring to nothing: SEGV inside
+// StepGeom_CartesianPoint) or run away (an IGES edge list whose count is a billion, from 6 KB),
+// both found by fuzz_step / fuzz_iges: refused in one line, the process unharmed.
+TEST_F(CadIo, FilesThatBreakOpenCascadeAreRefused) {
+  const std::string data = FLANK_TEST_DATA_DIR "/cad/";
+  auto message_of = [](const std::string& path, double seconds) {
+    try {
+      io::CadPart::read(path, seconds);
+    } catch (const io::Error& e) {
+      return std::string(e.what());
+    }
+    return std::string();
+  };
+  const std::string crash = message_of(data + "occt_crash.step", 0);
+  EXPECT_EQ(crash.rfind(data + "occt_crash.step: Open CASCADE crashed", 0), 0u) << crash;
+  const std::string slow = message_of(data + "occt_huge_count.igs", 2.0);
+  EXPECT_EQ(slow.rfind(data + "occt_huge_count.igs: Open CASCADE did not finish reading this file in 2 s", 0), 0u)
+      << slow;
+}
+
 // The command line: bad CAD input is exit 2 with one line and no output; info lists the faces.
 TEST_F(CadIo, CommandLineRefusesBadCadAndListsFaces) {
   file("bad.step", "ISO-10303-21;\nHEADER;\nENDSEC;\nDATA;\nENDSEC;\nEND-ISO-10303-21;\n");
