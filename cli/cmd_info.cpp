@@ -24,9 +24,10 @@ void register_info(CLI::App& app, int* exit_code) {
     if (!io::is_cad_path(args->mesh) && (args->tolerance || args->tolerance_rel))
       throw UsageError("--tolerance and --tolerance-rel set the tessellation of a STEP or IGES file; " +
                        args->mesh + " is a mesh");
-    if (io::is_cad_path(args->mesh)) {
-      // The faces first: --faces picks among them.
-      const io::CadPart part = io::CadPart::read(args->mesh);
+    Progress quiet("info", true);
+    const Design design = read_design(*args, quiet);
+    if (design.cad) {
+      const io::CadPart& part = *design.part;
       std::printf("file            %s (%s, %zu faces)\n", printable(args->mesh).c_str(), part.format().c_str(),
                   part.faces().size());
       std::printf("face  surface     area mm^2     bbox min                          bbox max\n");
@@ -35,8 +36,6 @@ void register_info(CLI::App& app, int* exit_code) {
                     f.area, f.min.x(), f.min.y(), f.min.z(), f.max.x(), f.max.y(), f.max.z(),
                     part.face_name(f.index).empty() ? "" : "  ", printable(part.face_name(f.index)).c_str());
     }
-    Progress quiet("info", true);
-    const Design design = read_design(*args, quiet);
     const io::LoadedMesh& lm = design.lm;
     const auto& r = lm.report;
     const BoundingBox box = bounding_box(lm.mesh);

@@ -185,7 +185,8 @@ Design read_design(const PatchArgs& a, Progress& progress) {
   }
   d.cad = true;
   if (!a.faces.empty()) d.faces = parse_faces(a.faces);
-  const io::CadPart part = io::CadPart::read(a.mesh);
+  d.part = std::make_shared<const io::CadPart>(io::CadPart::read(a.mesh));
+  const io::CadPart& part = *d.part;
   part.check_faces(d.faces);
   if (d.faces.empty())
     for (const io::CadFace& f : part.faces()) d.faces.push_back(f.index);

@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "io/cad.h"
 #include "io/output_set.h"
 #include "io/read_mesh.h"
 #include "report/write.h"
@@ -53,6 +54,7 @@ struct Design {
   std::vector<int> faces;        // CAD: the faces used (1-based), all when --faces is not given
   double chord_deviation = 0.0;  // CAD: the largest chord deviation measured, mm
   double chord_target = 0.0;     // CAD: the deviation asked of the tessellation, mm
+  std::shared_ptr<const io::CadPart> part;  // CAD: the file as read (info lists its faces)
 };
 Design read_design(const PatchArgs& a, Progress& progress);
 // --faces "1,3,7-9" → {1, 3, 7, 8, 9}; throws UsageError naming the option.

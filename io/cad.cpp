@@ -53,6 +53,7 @@
 #include <gp_Pln.hxx>
 
 #include <fcntl.h>
+#include <sys/prctl.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -192,9 +193,13 @@ enum class ChildEnd { finished, crashed, timed_out };
 // the parent installed; after `seconds` it is killed.
 ChildEnd run_in_child(const std::function<void()>& work, double seconds) {
   std::fflush(nullptr);
+  const pid_t parent = ::getpid();
   const pid_t pid = ::fork();
   if (pid < 0) return ChildEnd::finished;  // no child to spare: read in this process as without the probe
   if (pid == 0) {
+    // The child never outlives flank (killed, or interrupted with Ctrl-C).
+    ::prctl(PR_SET_PDEATHSIG, SIGKILL);
+    if (::getppid() != parent) ::_exit(1);
     for (const int sig : {SIGSEGV, SIGBUS, SIGABRT, SIGFPE, SIGILL}) std::signal(sig, SIG_DFL);
     const int null = ::open("/dev/null", O_WRONLY);
     if (null >= 0) {
