@@ -33,6 +33,8 @@
 #include <STEPCAFControl_Writer.hxx>
 #include <STEPControl_Controller.hxx>
 #include <Standard_Failure.hxx>
+#include <TColStd_Array1OfInteger.hxx>
+#include <TColStd_Array1OfReal.hxx>
 #include <TColgp_Array2OfPnt.hxx>
 #include <TColgp_HArray1OfPnt.hxx>
 #include <TDF_Label.hxx>
@@ -516,10 +518,55 @@ SplineSurface SplineSurface::fit(const std::string& name, const Points& grid, in
       for (int j = 0; j < cols; ++j)
         points.SetValue(i + 1, j + 1, pnt(grid.row(static_cast<Eigen::Index>(i) * cols + j).transpose()));
     GeomAPI_PointsToBSplineSurface approx;
-    approx.Init(points, Approx_IsoParametric, 3, 8, GeomAbs_C2, tolerance);
+    if (tolerance > 0)
+      approx.Init(points, Approx_IsoParametric, 3, 8, GeomAbs_C2, tolerance);
+    else
+      approx.Interpolate(points, Approx_IsoParametric);
     if (!approx.IsDone() || approx.Surface().IsNull()) fail(name, "no B-spline surface within the tolerance");
     auto impl = std::make_shared<Impl>();
     impl->surface = approx.Surface();
+    return SplineSurface(std::move(impl));
+  });
+}
+
+SplineSurface SplineSurface::from_poles(const std::string& name, const Points& poles, int nu, int nv,
+                                      const std::vector<double>& knots_u, const std::vector<double>& knots_v) {
+  quiet_occt();
+  if (nu < 4 || nv < 4 || poles.rows() != static_cast<Eigen::Index>(nu) * nv || !poles.allFinite() ||
+      knots_u.size() != static_cast<std::size_t>(nu + 4) || knots_v.size() != static_cast<std::size_t>(nv + 4))
+    fail(name, "a cubic B-spline surface needs at least 4 × 4 finite poles and clamped knots");
+  // OCCT takes distinct knots with multiplicities.
+  auto distinct = [](const std::vector<double>& knots, TColStd_Array1OfReal*& values, TColStd_Array1OfInteger*& mults) {
+    std::vector<double> v;
+    std::vector<int> m;
+    for (const double k : knots) {
+      if (!v.empty() && k == v.back()) {
+        ++m.back();
+      } else {
+        v.push_back(k);
+        m.push_back(1);
+      }
+    }
+    values = new TColStd_Array1OfReal(1, static_cast<int>(v.size()));
+    mults = new TColStd_Array1OfInteger(1, static_cast<int>(v.size()));
+    for (std::size_t i = 0; i < v.size(); ++i) {
+      values->SetValue(static_cast<int>(i + 1), v[i]);
+      mults->SetValue(static_cast<int>(i + 1), m[i]);
+    }
+  };
+  return guarded(name, "building a B-spline surface", [&] {
+    TColgp_Array2OfPnt array(1, nu, 1, nv);
+    for (int i = 0; i < nu; ++i)
+      for (int j = 0; j < nv; ++j)
+        array.SetValue(i + 1, j + 1, pnt(poles.row(static_cast<Eigen::Index>(i) * nv + j).transpose()));
+    TColStd_Array1OfReal *ku = nullptr, *kv = nullptr;
+    TColStd_Array1OfInteger *mu = nullptr, *mv = nullptr;
+    distinct(knots_u, ku, mu);
+    distinct(knots_v, kv, mv);
+    const std::unique_ptr<TColStd_Array1OfReal> hold_ku(ku), hold_kv(kv);
+    const std::unique_ptr<TColStd_Array1OfInteger> hold_mu(mu), hold_mv(mv);
+    auto impl = std::make_shared<Impl>();
+    impl->surface = new Geom_BSplineSurface(array, *ku, *kv, *mu, *mv, 3, 3);
     return SplineSurface(std::move(impl));
   });
 }

@@ -74,10 +74,15 @@ class CadPart {
 // along u and columns along v, point (i, j) at parameters (i / (rows − 1), j / (cols − 1)).
 class SplineSurface {
  public:
-  // Cubic (up to quintic where needed), C2, approximating every grid point within `tolerance`.
+  // Cubic (up to degree 8 where needed), C2, approximating every grid point within
+  // `tolerance`; with `tolerance` 0, the C2 cubic interpolating every grid point.
   // Throws io::Error(`name`: problem) if OCCT cannot fit it.
   static SplineSurface fit(const std::string& name, const Points& grid, int rows, int cols,
                            double tolerance);
+  // The clamped cubic B-spline surface with these poles (nu × nv, row-major, rows along u)
+  // on clamped knot vectors of nu + 4 and nv + 4 values over [0, 1].
+  static SplineSurface from_poles(const std::string& name, const Points& poles, int nu, int nv,
+                                  const std::vector<double>& knots_u, const std::vector<double>& knots_v);
   SplineSurface(const SplineSurface&);
   SplineSurface& operator=(const SplineSurface&);
   ~SplineSurface();

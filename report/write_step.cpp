@@ -2,8 +2,13 @@
 
 #include <cmath>
 #include <limits>
+#include <optional>
 
 #include "io/read_mesh.h"
+#include <Eigen/Dense>
+#include <Eigen/Sparse>
+
+#include "kernels/bspline.h"
 #include "kernels/envelope.h"
 
 namespace flank::report {
@@ -12,39 +17,92 @@ namespace {
 constexpr int kProfileSamples = 101;  // the meridian samples of patches.json's tool.profile
 }  // namespace
 
-FittedSurface fit_exact_grid(const std::string& name, const Points& fine, int rows, int cols,
-                             double fit_tolerance) {
+namespace {
+
+// The n × count basis matrix of the clamped cubic B-spline with `count` control points at the
+// uniform parameters k / (n − 1): 4 entries a row.
+Eigen::SparseMatrix<double> basis_matrix(int n, int count) {
+  const std::vector<double> knots = clamped_uniform_knots(count);
+  std::vector<Eigen::Triplet<double>> entries;
+  for (int k = 0; k < n; ++k) {
+    const BasisRow row = cubic_basis(knots, count, k / static_cast<double>(n - 1));
+    for (int c = 0; c <= kSplineDegree; ++c) entries.emplace_back(k, row.first + c, row.value[static_cast<std::size_t>(c)]);
+  }
+  Eigen::SparseMatrix<double> B(n, count);
+  B.setFromTriplets(entries.begin(), entries.end());
+  return B;
+}
+
+// The tensor-product least-squares surface: on a full grid it separates, poles = Bu⁺ P Bv⁺ᵀ
+// per coordinate, each factor from banded normal equations.
+io::SplineSurface least_squares(const std::string& name, const Points& grid, int rows, int cols, int nu, int nv) {
+  const Eigen::SparseMatrix<double> Bu = basis_matrix(rows, nu), Bv = basis_matrix(cols, nv);
+  const Eigen::SparseMatrix<double> Nu = Bu.transpose() * Bu, Nv = Bv.transpose() * Bv;
+  const Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> su(Nu), sv(Nv);
+  if (su.info() != Eigen::Success || sv.info() != Eigen::Success)
+    throw io::Error(name + ": the B-spline fit is singular");
+  Points poles(static_cast<Eigen::Index>(nu) * nv, 3);
+  for (int c = 0; c < 3; ++c) {
+    Eigen::MatrixXd P(rows, cols);
+    for (int i = 0; i < rows; ++i)
+      for (int j = 0; j < cols; ++j) P(i, j) = grid(static_cast<Eigen::Index>(i) * cols + j, c);
+    const Eigen::MatrixXd along_u = su.solve(Eigen::MatrixXd(Bu.transpose() * P));                  // nu × cols
+    const Eigen::MatrixXd both = sv.solve(Eigen::MatrixXd(Bv.transpose() * along_u.transpose())).transpose();  // nu × nv
+    for (int i = 0; i < nu; ++i)
+      for (int j = 0; j < nv; ++j) poles(static_cast<Eigen::Index>(i) * nv + j, c) = both(i, j);
+  }
+  return io::SplineSurface::from_poles(name, poles, nu, nv, clamped_uniform_knots(nu), clamped_uniform_knots(nv));
+}
+
+double deviation(const io::SplineSurface& surface, const Points& fine, int rows, int cols) {
+  const int fine_rows = 2 * rows - 1, fine_cols = 2 * cols - 1;
+  double worst = 0.0;
+  for (int i = 0; i < fine_rows; ++i)
+    for (int j = 0; j < fine_cols; ++j) {
+      const Vec3 on = surface.point(i / (2.0 * (rows - 1)), j / (2.0 * (cols - 1)));
+      const Vec3 exact = fine.row(static_cast<Eigen::Index>(i) * fine_cols + j).transpose();
+      worst = std::max(worst, (on - exact).norm());
+    }
+  return worst;
+}
+
+}  // namespace
+
+FittedSurface fit_exact_grid(const std::string& name, const Points& fine, int rows, int cols, double target) {
   const int fine_cols = 2 * cols - 1;
   Points grid(static_cast<Eigen::Index>(rows) * cols, 3);
   for (int i = 0; i < rows; ++i)
     for (int j = 0; j < cols; ++j)
       grid.row(static_cast<Eigen::Index>(i) * cols + j) = fine.row(static_cast<Eigen::Index>(2 * i) * fine_cols + 2 * j);
-  FittedSurface out{io::SplineSurface::fit(name, grid, rows, cols, fit_tolerance), 0.0};
-  for (int i = 0; i < 2 * rows - 1; ++i)
-    for (int j = 0; j < fine_cols; ++j) {
-      const Vec3 on = out.surface.point(i / (2.0 * (rows - 1)), j / (2.0 * (cols - 1)));
-      const Vec3 exact = fine.row(static_cast<Eigen::Index>(i) * fine_cols + j).transpose();
-      out.deviation = std::max(out.deviation, (on - exact).norm());
-    }
-  return out;
+  // Half as many poles as grid points first (a lighter file), then as many (the interpolating
+  // cubic); the first that meets `target` at every fine point, else the more accurate.
+  FittedSurface best{least_squares(name, grid, rows, cols, std::max(4, (rows + 1) / 2), std::max(4, (cols + 1) / 2)), 0.0};
+  best.deviation = deviation(best.surface, fine, rows, cols);
+  if (best.deviation <= target) return best;
+  FittedSurface full{least_squares(name, grid, rows, cols, rows, cols), 0.0};
+  full.deviation = deviation(full.surface, fine, rows, cols);
+  return full.deviation < best.deviation ? full : best;
 }
 
-bool exact_omega_grid(const Patch& p, Points& fine) {
+bool exact_omega_grid(const Patch& p, int rows, int cols, Points& fine) {
   const EnvelopeMesh& env = p.envelope;
-  const int rows = env.rows, cols = env.cols;
-  if (rows < 2 || cols < 2 || env.V.rows() != static_cast<Eigen::Index>(rows) * cols) return false;
+  if (env.rows < 2 || env.cols < 2 || env.V.rows() != static_cast<Eigen::Index>(env.rows) * env.cols) return false;
   const int fr = 2 * rows - 1, fc = 2 * cols - 1;
   fine.resize(static_cast<Eigen::Index>(fr) * fc, 3);
+  auto V = [&](int a, int b) -> Vec3 { return env.V.row(static_cast<Eigen::Index>(a) * env.cols + b).transpose(); };
   for (int i = 0; i < fr; ++i) {
     const double t = i / static_cast<double>(fr - 1);
     const Line l = p.motion.ruling(t);
     const Vec3 at = p.motion.a_at(t, 1), bt = p.motion.b_at(t, 1);
+    const double ti = t * (env.rows - 1);
+    const int i0 = std::min(static_cast<int>(ti), env.rows - 2);
+    const double wu = ti - i0;
     for (int j = 0; j < fc; ++j) {
       const double s = j / static_cast<double>(fc - 1);
       // The side the envelope grid took: the candidate nearer to it (bilinear between samples).
-      const int i0 = std::min(i / 2, rows - 2), j0 = std::min(j / 2, cols - 2);
-      const double wu = 0.5 * (i - 2 * i0), wv = 0.5 * (j - 2 * j0);
-      auto V = [&](int a, int b) -> Vec3 { return env.V.row(static_cast<Eigen::Index>(a) * cols + b).transpose(); };
+      const double sj = s * (env.cols - 1);
+      const int j0 = std::min(static_cast<int>(sj), env.cols - 2);
+      const double wv = sj - j0;
       const Vec3 near = (1 - wu) * ((1 - wv) * V(i0, j0) + wv * V(i0, j0 + 1)) +
                         wu * ((1 - wv) * V(i0 + 1, j0) + wv * V(i0 + 1, j0 + 1));
       const Vec3 centre = l.point(s), rs = l.b - l.a, rt = (1 - s) * at + s * bt;
@@ -57,6 +115,33 @@ bool exact_omega_grid(const Patch& p, Points& fine) {
     }
   }
   return fine.allFinite();
+}
+
+std::vector<Vec2> solid_profile(const Cutter& c) {
+  std::vector<Vec2> m;
+  bool simple = true;
+  for (int k = 0; k < kProfileSamples; ++k) {
+    m.push_back(c.meridian(k / (kProfileSamples - 1.0)));
+    simple = simple && m.back().allFinite() && m.back().y() > 0 && (k == 0 || m[k].x() > m[k - 1].x());
+  }
+  if (simple) return m;
+  // The contact circles fold back along the axis (|d d″ + d′²| > L² somewhere): the tool is
+  // then the outline of the union of its spheres over the axial span of the meridian.
+  double z0 = std::numeric_limits<double>::infinity(), z1 = -z0;
+  for (const Vec2& q : m)
+    if (std::isfinite(q.x())) z0 = std::min(z0, q.x()), z1 = std::max(z1, q.x());
+  constexpr int kOutline = 201, kSpheres = 2001;
+  std::vector<Vec2> outline;
+  for (int k = 0; k < kOutline; ++k) {
+    const double z = z0 + (z1 - z0) * k / (kOutline - 1.0);
+    double r = 0.0;
+    for (int i = 0; i < kSpheres; ++i) {
+      const double s = i / (kSpheres - 1.0), d = c.radius(s), dz = z - s * c.length;
+      r = std::max(r, std::sqrt(std::max(0.0, d * d - dz * dz)));
+    }
+    outline.push_back({z, r});
+  }
+  return outline;
 }
 
 // Appended, not "P" + …: GCC 12 warns falsely (-Wrestrict, its bug 105329) on the latter.
@@ -73,10 +158,21 @@ std::vector<double> write_patches_step(const std::filesystem::path& path, const 
   std::vector<io::NamedSurface> faces;
   for (std::size_t k = 0; k < patches.size(); ++k) {
     const Patch& p = patches[k];
-    Points fine;
-    if (!exact_omega_grid(p, fine)) continue;
-    FittedSurface f = fit_exact_grid(path.string() + ": patch " + std::to_string(p.id), fine, p.envelope.rows,
-                                     p.envelope.cols, tolerance / 200.0);
+    // Ω's grid in the evaluation's (t, s) samples, then up to eight times as many rows (along
+    // the motion, where a fitted motion's knots leave kinks) and columns, until the face is
+    // within 1% of the tolerance; else the closest.
+    std::optional<FittedSurface> best;
+    for (const auto& [more_rows, more_cols] : {std::pair{1, 1}, {2, 1}, {2, 2}, {4, 2}, {4, 4}, {8, 4}, {8, 8}}) {
+      const int rows = (p.envelope.rows - 1) * more_rows + 1, cols = (p.envelope.cols - 1) * more_cols + 1;
+      Points fine;
+      if (!exact_omega_grid(p, rows, cols, fine)) break;
+      FittedSurface f = fit_exact_grid(path.string() + ": patch " + std::to_string(p.id), fine, rows, cols,
+                                       tolerance / 100.0);
+      if (!best || f.deviation < best->deviation) best = std::move(f);
+      if (best->deviation <= tolerance / 100.0) break;
+    }
+    if (!best) continue;
+    FittedSurface& f = *best;
     deviation[k] = f.deviation;
     faces.push_back({face_name(p), std::move(f.surface)});
   }
@@ -92,7 +188,7 @@ void write_tools_step(const std::filesystem::path& path, const std::vector<Patch
     const Line l = p.motion.ruling(0.0);
     s.origin = l.a;
     s.axis = (l.b - l.a).normalized();
-    for (int k = 0; k < kProfileSamples; ++k) s.meridian.push_back(p.cutter.meridian(k / (kProfileSamples - 1.0)));
+    s.meridian = solid_profile(p.cutter);
     solids.push_back(std::move(s));
   }
   io::write_solids(path, solids);

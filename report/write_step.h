@@ -9,6 +9,7 @@
 
 #include "io/cad.h"
 #include "kernels/types.h"
+#include "kernels/cutter.h"
 #include "solver/patch.h"
 
 namespace flank::report {
@@ -18,26 +19,33 @@ struct FittedSurface {
   double deviation = 0.0;  // max distance from the exact surface at grid points and cell midpoints, mm
 };
 
-// Fits a B-spline surface to the even points of `fine`, a (2·rows − 1) × (2·cols − 1) grid of
-// exact surface points (row-major), within `fit_tolerance`, and measures its deviation from
-// every fine point (grid points, edge midpoints and cell centres) at the same parameters:
-// an upper bound on the distance between the two surfaces there. Throws io::Error(name: …).
+// Fits a clamped cubic B-spline surface (least squares, tensor product, uniform knots) to the
+// even points of `fine`, a (2·rows − 1) × (2·cols − 1) grid of exact surface points
+// (row-major), and measures its deviation from every fine point (grid points, edge midpoints
+// and cell centres) at the same parameters: an upper bound on the distance between the two
+// surfaces there. Takes half as many poles as grid points when that meets `target`, else as
+// many. Throws io::Error(name: …).
 FittedSurface fit_exact_grid(const std::string& name, const Points& fine, int rows, int cols,
-                             double fit_tolerance);
+                             double target);
 
 // Ω of patch `p` sampled exactly (forward model) on a (2·rows − 1) × (2·cols − 1) grid over its
-// (t, s) ∈ [0, 1]², rows × cols being its envelope grid; false if some point has no envelope.
-bool exact_omega_grid(const Patch& p, Points& fine);
+// (t, s) ∈ [0, 1]², on the side its envelope grid took; false if some point has no envelope.
+bool exact_omega_grid(const Patch& p, int rows, int cols, Points& fine);
+
+// The meridian tools.step revolves: patches.json's tool.profile (101 points of
+// Cutter::meridian), or, where that folds back along the axis, the outline of the union of the
+// cutter's spheres (201 points).
+std::vector<Vec2> solid_profile(const Cutter& c);
 
 // The name of a patch's face in patches.step and of its cutter in tools.step.
 std::string face_name(const Patch& p);
 std::string tool_name(const Patch& p);
 
-// patches.step: one named B-spline face per patch, fitted within tolerance / 200. Returns each
+// patches.step: one named B-spline face per patch (within 1% of the tolerance). Returns each
 // patch's measured deviation (NaN where Ω could not be sampled; that patch is left out).
 std::vector<double> write_patches_step(const std::filesystem::path& path, const std::vector<Patch>& patches,
                                        double tolerance);
-// tools.step: each cutter's meridian (patches.json's tool.profile), closed by flat ends and
+// tools.step: each cutter's meridian (solid_profile), closed by flat ends and
 // revolved about its axis, placed at t = 0 of its motion.
 void write_tools_step(const std::filesystem::path& path, const std::vector<Patch>& patches);
 
