@@ -160,16 +160,16 @@ std::vector<double> write_patches_step(const std::filesystem::path& path, const 
     const Patch& p = patches[k];
     // Ω's grid in the evaluation's (t, s) samples, then up to eight times as many rows (along
     // the motion, where a fitted motion's knots leave kinks) and columns, until the face is
-    // within 1% of the tolerance; else the closest.
+    // within 1/150 of the tolerance (a margin under the 1% promised); else the closest.
     std::optional<FittedSurface> best;
     for (const auto& [more_rows, more_cols] : {std::pair{1, 1}, {2, 1}, {2, 2}, {4, 2}, {4, 4}, {8, 4}, {8, 8}}) {
       const int rows = (p.envelope.rows - 1) * more_rows + 1, cols = (p.envelope.cols - 1) * more_cols + 1;
       Points fine;
       if (!exact_omega_grid(p, rows, cols, fine)) break;
       FittedSurface f = fit_exact_grid(path.string() + ": patch " + std::to_string(p.id), fine, rows, cols,
-                                       tolerance / 100.0);
+                                       tolerance / 150.0);
       if (!best || f.deviation < best->deviation) best = std::move(f);
-      if (best->deviation <= tolerance / 100.0) break;
+      if (best->deviation <= tolerance / 150.0) break;
     }
     if (!best) continue;
     FittedSurface& f = *best;
