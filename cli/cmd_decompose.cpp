@@ -88,7 +88,7 @@ int run_decompose(const DecomposeArgs& a) {
   const double total = progress.elapsed();
 
   report::RunInfo run;
-  run.input_path = a.mesh;
+  run.command = "decompose";
   run.vertices = lm.mesh.vertex_count();
   run.triangles = lm.mesh.face_count();
   run.bbox_diagonal = diagonal;
@@ -117,13 +117,14 @@ int run_decompose(const DecomposeArgs& a) {
   // Area sums in a different order can leave -1e-11 mm^2 where nothing is left.
   const double uncovered_area = std::max(0.0, r.total_area - r.covered_area);
   run.uncovered_area = uncovered_area;
+  run.total_area = r.total_area;
   run.coverage_curve = r.coverage_curve;
   for (const UncoveredRegion& u : r.uncovered) run.uncovered.push_back({u.area, u.centroid, u.vertices});
   run.timing_s = {{"index", index_s},   {"seeds", r.times.seeds},   {"candidates", r.times.candidates},
                   {"fit", r.times.fit}, {"cover", r.times.cover},   {"finish", r.times.finish},
                   {"total", total}};
 
-  write_outputs(*out, a, run, r.patches, lm.mesh, r.vertex_patch, o.tolerance);
+  write_outputs(*out, a, design, run, r.patches, lm.mesh, r.vertex_patch, o.tolerance);
 
   std::printf("%s: %zu patch%s cover %.2f%% of %.4g mm^2 within %.3g mm\n", printable(a.mesh).c_str(),
               r.patches.size(), r.patches.size() == 1 ? "" : "es", 100.0 * r.coverage, r.total_area,
@@ -163,7 +164,7 @@ int run_decompose(const DecomposeArgs& a) {
               "cover %.2fs, finish %.2fs, total %.2fs\n",
               index_s, r.times.seeds, r.times.candidates, r.lines_scored, r.candidates, r.times.fit, r.grown,
               r.times.cover, r.times.finish, total);
-  std::printf("results in %s: patches.json envelopes.ply design.ply toolpath.apt patches.step tools.step\n", printable(a.out_dir).c_str());
+  std::printf("%s\n", results_line(a).c_str());
   return 0;
 }
 

@@ -150,7 +150,7 @@ int run_fit(const FitArgs& a) {
                  std::to_string(100.0 * patch.coverage_fraction) + "%");
 
   report::RunInfo run;
-  run.input_path = a.mesh;
+  run.command = "fit";
   run.vertices = lm.mesh.vertex_count();
   run.triangles = lm.mesh.face_count();
   run.bbox_diagonal = diagonal;
@@ -168,13 +168,15 @@ int run_fit(const FitArgs& a) {
   add_design_settings(design, run.settings);
   run.tolerance = tol;
   run.coverage_fraction = patch.coverage_fraction;
-  run.uncovered_area = total_area(lm.mesh) - patch.covered_area;
+  run.total_area = total_area(lm.mesh);
+  run.uncovered_area = std::max(0.0, run.total_area - patch.covered_area);
+  run.coverage_curve = {patch.coverage_fraction};
   run.timing_s = {{"index", index_s}, {"fit", fit.fit.timing.total_s}, {"total", progress.elapsed()}};
 
   std::vector<Patch> patches{std::move(patch)};
   std::vector<int> vertex_patch(static_cast<std::size_t>(lm.mesh.vertex_count()), -1);
   for (int v : patches[0].covered_vertices) vertex_patch[static_cast<std::size_t>(v)] = 0;
-  write_outputs(*out, a, run, patches, lm.mesh, vertex_patch, tol);
+  write_outputs(*out, a, design, run, patches, lm.mesh, vertex_patch, tol);
   const Patch& p = patches[0];
   std::printf("patch 0: %s cutter, length %.4f mm, sphere radii %.4f..%.4f mm\n",
               std::string(to_string(p.cutter.kind)).c_str(), p.cutter.length, p.cutter.radius(0),
@@ -186,7 +188,7 @@ int run_fit(const FitArgs& a) {
   if (p.collision.checked)
     std::printf("  holder %s (min clearance %.4g mm)\n", p.collision.holder_clear ? "clear" : "COLLIDES",
                 p.collision.min_clearance);
-  std::printf("results in %s: patches.json envelopes.ply design.ply toolpath.apt patches.step tools.step\n", printable(a.out_dir).c_str());
+  std::printf("%s\n", results_line(a).c_str());
   return 0;
 }
 

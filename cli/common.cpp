@@ -12,6 +12,7 @@
 #include <sstream>
 
 #include "io/cad.h"
+#include "report/write_html.h"
 #include "report/write_step.h"
 #include "io/read_lines.h"
 
@@ -228,7 +229,7 @@ void add_patch_options(CLI::App* cmd, PatchArgs& a) {
   cmd->add_option("MESH", a.mesh, "Design surface: STL, OBJ or PLY mesh, or STEP/IGES B-rep")->required();
   cmd->add_option("--faces", a.faces,
                   "STEP/IGES only: the faces to machine, by index as flank info lists them (e.g. 1,3,7-9; default all)");
-  cmd->add_option("-o,--output", a.out_dir, "Folder for patches.json, envelopes.ply, design.ply, toolpath.apt, patches.step, tools.step")
+  cmd->add_option("-o,--output", a.out_dir, "Folder for report.html, patches.json, envelopes.ply, design.ply, toolpath.apt, patches.step, tools.step")
       ->required();
   cmd->add_option("--tolerance", a.tolerance, "Allowed error in mm");
   cmd->add_option("--tolerance-rel", a.tolerance_rel,
@@ -238,19 +239,40 @@ void add_patch_options(CLI::App* cmd, PatchArgs& a) {
   cmd->add_option("--threads", a.threads, "Worker threads (default: all cores)")->check(CLI::Range(1, 1024));
   cmd->add_option("--apt-steps", a.apt_steps, "GOTO steps per patch in toolpath.apt (default 200)")
       ->check(CLI::Range(2, 1000000));
+  cmd->add_flag("--no-report", a.no_report, "Do not write report.html (an earlier run's report.html is removed)");
   cmd->add_flag("--flip", a.flip, "Reverse the surface orientation (tools live on the normals' side)");
   cmd->add_flag("-q,--quiet", a.quiet, "No progress lines on stderr");
 }
 
-std::unique_ptr<io::OutputSet> open_outputs(const PatchArgs& a) {
-  return std::make_unique<io::OutputSet>(
-      a.out_dir, std::vector<std::string>{"patches.json", "envelopes.ply", "design.ply", "toolpath.apt",
-                                          "patches.step", "tools.step"});
+std::string results_line(const PatchArgs& a) {
+  std::string line = "results in " + printable(a.out_dir) + ":";
+  for (const std::string& n : output_names(a)) line += " " + n;
+  return line;
 }
 
-void write_outputs(io::OutputSet& out, const PatchArgs& a, report::RunInfo run,
+std::vector<std::string> output_names(const PatchArgs& a) {
+  std::vector<std::string> names{"patches.json", "envelopes.ply", "design.ply", "toolpath.apt", "patches.step",
+                                 "tools.step"};
+  if (!a.no_report) names.insert(names.begin(), "report.html");
+  return names;
+}
+
+std::unique_ptr<io::OutputSet> open_outputs(const PatchArgs& a) {
+  // Under --no-report an earlier run's report.html would describe another run: it goes.
+  return std::make_unique<io::OutputSet>(a.out_dir, output_names(a),
+                                         a.no_report ? std::vector<std::string>{"report.html"}
+                                                     : std::vector<std::string>{});
+}
+
+void write_outputs(io::OutputSet& out, const PatchArgs& a, const Design& design, report::RunInfo run,
                    const std::vector<Patch>& patches, const Mesh& mesh,
                    const std::vector<int>& vertex_patch, double tolerance) {
+  run.input_path = a.mesh;
+  run.input_format = design.lm.report.format;
+  std::error_code ec;
+  const std::uintmax_t bytes = std::filesystem::file_size(std::filesystem::path(a.mesh), ec);
+  run.input_bytes = ec ? -1 : static_cast<long long>(bytes);
+  if (!a.no_report) report::write_report_html(out.staged("report.html"), run, patches, mesh, vertex_patch);
   run.nurbs_deviation = report::write_patches_step(out.staged("patches.step"), patches, tolerance);
   report::write_tools_step(out.staged("tools.step"), patches);
   report::write_patches_json(out.staged("patches.json"), run, patches);

@@ -41,7 +41,7 @@ struct PatchArgs {
   std::string mesh, out_dir, holder, faces;
   std::optional<double> tolerance, tolerance_rel;
   int threads = 0, apt_steps = 200;
-  bool flip = false, quiet = false;
+  bool flip = false, quiet = false, no_report = false;
 };
 void add_patch_options(CLI::App* cmd, PatchArgs& a);
 
@@ -64,10 +64,15 @@ std::vector<int> parse_faces(const std::string& text);
 void add_design_settings(const Design& d, std::vector<report::Setting>& settings);
 
 // The output folder a.out_dir, checked and created before any work (io::OutputSet).
+// The files a run writes there, report.html first (what a person opens).
+std::vector<std::string> output_names(const PatchArgs& a);
+// "results in FOLDER: report.html patches.json …", the last line of a run.
+std::string results_line(const PatchArgs& a);
 std::unique_ptr<io::OutputSet> open_outputs(const PatchArgs& a);
-// patches.json, envelopes.ply, design.ply, toolpath.apt, patches.step and tools.step, written into `out` and moved into
-// place together: the earlier run's set is replaced all or nothing.
-void write_outputs(io::OutputSet& out, const PatchArgs& a, report::RunInfo run,
+// report.html (unless --no-report), patches.json, envelopes.ply, design.ply, toolpath.apt,
+// patches.step and tools.step, written into `out` and moved into place together: the earlier
+// run's set is replaced all or nothing. Fills in what `run` says of the input file.
+void write_outputs(io::OutputSet& out, const PatchArgs& a, const Design& design, report::RunInfo run,
                    const std::vector<Patch>& patches, const Mesh& mesh,
                    const std::vector<int>& vertex_patch, double tolerance);
 

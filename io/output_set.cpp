@@ -36,8 +36,8 @@ void refuse_folders_in_the_way(const fs::path& folder, const std::vector<std::st
 
 }  // namespace
 
-OutputSet::OutputSet(const fs::path& folder, std::vector<std::string> names)
-    : folder_(folder), names_(std::move(names)) {
+OutputSet::OutputSet(const fs::path& folder, std::vector<std::string> names, std::vector<std::string> stale)
+    : folder_(folder), names_(std::move(names)), stale_(std::move(stale)) {
   check_folder_path(folder_);
   std::error_code ec;
   if (!fs::exists(folder_, ec)) {
@@ -46,6 +46,7 @@ OutputSet::OutputSet(const fs::path& folder, std::vector<std::string> names)
     created_folder_ = true;
   }
   refuse_folders_in_the_way(folder_, names_);
+  refuse_folders_in_the_way(folder_, stale_);
   // A private folder (0700, a name nobody can guess or plant beforehand) for this run's files.
   std::string tmpl = (folder_ / ".flank-run-XXXXXX").string();
   if (::mkdtemp(tmpl.data()) == nullptr) {
@@ -66,6 +67,7 @@ fs::path OutputSet::staged(const std::string& name) const { return staging_ / na
 
 void OutputSet::commit() {
   refuse_folders_in_the_way(folder_, names_);
+  refuse_folders_in_the_way(folder_, stale_);
   const fs::path old = staging_ / ".previous";
   std::error_code ec;
   fs::create_directory(old, ec);
@@ -77,11 +79,12 @@ void OutputSet::commit() {
     for (const std::string& n : moved_in) fs::rename(folder_ / n, staging_ / n, e);
     for (const std::string& n : moved_aside) fs::rename(old / n, folder_ / n, e);
   };
-  for (const std::string& n : names_) {
-    if (!fs::exists(staging_ / n, ec)) {
-      roll_back();
-      throw Error((folder_ / n).string() + ": was not written");
-    }
+  for (const std::string& n : names_)
+    if (!fs::exists(staging_ / n, ec)) throw Error((folder_ / n).string() + ": was not written");
+  // The earlier set aside (removed with the staging folder once the new one is in place).
+  std::vector<std::string> earlier = names_;
+  earlier.insert(earlier.end(), stale_.begin(), stale_.end());
+  for (const std::string& n : earlier) {
     if (fs::exists(fs::symlink_status(folder_ / n, ec))) {
       fs::rename(folder_ / n, old / n, ec);
       if (ec) {

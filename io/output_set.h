@@ -18,9 +18,12 @@ class OutputSet {
  public:
   // Checks `folder` (a folder or a missing path whose parent can hold one), creates it if
   // missing and makes the staging folder in it. `names` are the files the run will write:
-  // one that exists as a folder there is refused now rather than after the work.
-  // Throws io::Error naming the folder and the problem.
-  OutputSet(const std::filesystem::path& folder, std::vector<std::string> names);
+  // one that exists as a folder there is refused now rather than after the work. `stale` are
+  // files an earlier run may have left that this run does not write (report.html under
+  // --no-report): commit removes them with the rest of the earlier set, so the folder never
+  // holds a file of another run. Throws io::Error naming the folder and the problem.
+  OutputSet(const std::filesystem::path& folder, std::vector<std::string> names,
+            std::vector<std::string> stale = {});
   // Without commit(): removes the staging folder, and the output folder if this set created
   // it and it is empty.
   ~OutputSet();
@@ -30,14 +33,14 @@ class OutputSet {
   // Where to write file `name` (one of `names`) before commit.
   std::filesystem::path staged(const std::string& name) const;
   // Moves every staged file into the folder, replacing the earlier run's files of the same
-  // names; on any failure restores those and throws io::Error.
+  // names and removing its stale ones; on any failure restores those and throws io::Error.
   void commit();
 
   const std::filesystem::path& folder() const { return folder_; }
 
  private:
   std::filesystem::path folder_, staging_;
-  std::vector<std::string> names_;
+  std::vector<std::string> names_, stale_;
   bool created_folder_ = false;
   bool committed_ = false;
 };

@@ -2,6 +2,7 @@
 // Every file goes through write_file_atomic; every byte is deterministic (fixed formats, no
 // locale-dependent or pointer-dependent output).
 #include "report/write.h"
+#include "report/palette.h"
 #include "report/write_step.h"
 
 #include <algorithm>
@@ -144,19 +145,6 @@ std::array<std::uint8_t, 3> error_colour(double e, double tolerance) {
   return {fade, fade, 255};
 }
 
-// Distinct, colour-blind-friendly hues (Tableau 10 without its pink, which is near magenta).
-constexpr std::array<std::array<std::uint8_t, 3>, 11> kPalette = {{{31, 119, 180},
-                                                                    {255, 127, 14},
-                                                                    {44, 160, 44},
-                                                                    {214, 39, 40},
-                                                                    {148, 103, 189},
-                                                                    {140, 86, 75},
-                                                                    {127, 127, 127},
-                                                                    {188, 189, 34},
-                                                                    {23, 190, 207},
-                                                                    {174, 199, 232},
-                                                                    {255, 187, 120}}};
-constexpr std::array<std::uint8_t, 3> kUncovered = {255, 0, 255};
 
 void check_motion(const fs::path& path, const Patch& p) {
   const Motion& m = p.motion;
@@ -216,6 +204,12 @@ AptTool apt_tool(const Cutter& c, char tip) {
 
 }  // namespace
 
+std::string settings_json(const std::vector<Setting>& settings) {
+  Json out = Json::object();
+  for (const Setting& s : settings) out[s.key] = setting_value(s.value);
+  return out.dump(-1, ' ', false, Json::error_handler_t::replace);
+}
+
 void write_patches_json(const fs::path& path, const RunInfo& run, const std::vector<Patch>& patches) {
   for (const Patch& p : patches) check_cutter(path, p);
   Json root;
@@ -225,9 +219,7 @@ void write_patches_json(const fs::path& path, const RunInfo& run, const std::vec
                        {"vertices", run.vertices},
                        {"triangles", run.triangles},
                        {"bbox_diagonal", number(run.bbox_diagonal)}};
-  Json settings = Json::object();
-  for (const Setting& s : run.settings) settings[s.key] = setting_value(s.value);
-  root["settings"] = std::move(settings);
+  root["settings"] = Json::parse(settings_json(run.settings));
   Json curve = Json::array();
   for (double c : run.coverage_curve) curve.push_back(number(c));
   Json regions = Json::array();
@@ -318,8 +310,7 @@ void write_design_ply(const fs::path& path, const Mesh& mesh, const std::vector<
   for (int v = 0; v < mesh.vertex_count(); ++v) {
     for (int k = 0; k < 3; ++k) b.f32(mesh.V(v, k));
     const int id = vertex_patch[v];
-    const auto& colour = id < 0 ? kUncovered : kPalette[static_cast<std::size_t>(id) % kPalette.size()];
-    for (std::uint8_t c : colour) b.u8(c);
+    for (std::uint8_t c : patch_colour(id)) b.u8(c);
     b.i32(id < 0 ? -1 : id);
   }
   append_faces(b, mesh.F, 0);

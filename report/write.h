@@ -20,7 +20,10 @@ struct Setting {
 };
 
 struct RunInfo {
+  std::string command;       // decompose, fit
   std::string input_path;
+  std::string input_format;  // stl, obj, ply, step, iges
+  long long input_bytes = 0;
   int vertices = 0;
   int triangles = 0;
   double bbox_diagonal = 0.0;
@@ -28,6 +31,7 @@ struct RunInfo {
   double coverage_fraction = 0.0;
   double tolerance = 0.0;
   double uncovered_area = 0.0;
+  double total_area = 0.0;
   // The covered fraction after 1, 2, …, k patches: what each extra sweep buys.
   std::vector<double> coverage_curve;
   // Edge-connected regions left uncovered (for ball-end finishing), largest first.
@@ -42,6 +46,9 @@ struct RunInfo {
   // (NaN: no face written); empty when no patches.step was written.
   std::vector<double> nurbs_deviation;
 };
+
+// The settings as one JSON object, in their order (patches.json and report.html show the same).
+std::string settings_json(const std::vector<Setting>& settings);
 
 // patches.json, format flank-patches/1 (DESIGN "Output").
 void write_patches_json(const std::filesystem::path& path, const RunInfo& run,

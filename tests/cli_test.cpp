@@ -62,8 +62,9 @@ TEST_F(Cli, FitWritesEveryOutput) {
   const CliRun r = run("fit " + mesh.string() + " " + kLine + " --tool cylinder --tolerance-rel 5e-4 --holder 30,8 -q -o " +
                     out.string());
   ASSERT_EQ(r.code, 0) << r.err;
-  for (const char* name : {"patches.json", "envelopes.ply", "design.ply", "toolpath.apt"})
+  for (const char* name : {"report.html", "patches.json", "envelopes.ply", "design.ply", "toolpath.apt"})
     EXPECT_GT(fs::file_size(out / name), 100u) << name;
+  EXPECT_NE(r.out.find("results in " + out.string() + ": report.html patches.json"), std::string::npos) << r.out;
   std::ifstream json(out / "patches.json");
   const std::string text(std::istreambuf_iterator<char>(json), {});
   EXPECT_NE(text.find("\"flank-patches/1\""), std::string::npos);
@@ -140,6 +141,25 @@ TEST_F(Cli, DecomposeShowsTheTradeOff) {
   const std::string text(std::istreambuf_iterator<char>(json), {});
   for (const char* key : {"\"curve\"", "\"uncovered_regions\"", "\"noise_sigma\"", "\"max_gouge\""})
     EXPECT_NE(text.find(key), std::string::npos) << key;
+}
+
+// --no-report writes no report.html, and takes away an earlier run's: a report beside
+// patches.json always describes the same run.
+TEST_F(Cli, NoReportLeavesNoStaleReport) {
+  const fs::path mesh = dir_ / "part.stl";
+  ASSERT_EQ(run("synth --guides seed003 --tool cylinder:5 --resolution 61x21 -o " + mesh.string()).code, 0);
+  const fs::path out = dir_ / "results";
+  const std::string decompose = "decompose " + mesh.string() + " --tool cylinder --tolerance-rel 3e-4 -q -o " + out.string();
+  ASSERT_EQ(run(decompose).code, 0);
+  ASSERT_TRUE(fs::exists(out / "report.html"));
+  const CliRun r = run(decompose + " --no-report");
+  ASSERT_EQ(r.code, 0) << r.err;
+  EXPECT_FALSE(fs::exists(out / "report.html"));
+  EXPECT_TRUE(fs::exists(out / "patches.json"));
+  EXPECT_EQ(r.out.find("report.html"), std::string::npos) << r.out;
+  // A folder in report.html's place is refused before any work, --no-report or not.
+  fs::create_directories(out / "report.html");
+  expect_clean_failure(run(decompose + " --no-report"), "report.html", out / "none");
 }
 
 TEST_F(Cli, HelpIsReadable) {

@@ -26,6 +26,7 @@
 #include "io/write_mesh.h"
 #include "kernels/cutter.h"
 #include "solver/motion.h"
+#include "tests/saddle_mesh.h"
 
 namespace flank::report {
 namespace {
@@ -66,26 +67,7 @@ std::size_t expect_in_order(const std::string& text, std::initializer_list<std::
   return from;
 }
 
-// A 5 × 4 grid over a saddle with coordinates that are not short decimals.
-Mesh saddle() {
-  Mesh m;
-  const int nx = 5, ny = 4;
-  m.V.resize(nx * ny, 3);
-  for (int j = 0; j < ny; ++j)
-    for (int i = 0; i < nx; ++i) {
-      const double x = i / 3.0, y = j * 0.1 + 1e-9;
-      m.V.row(j * nx + i) << x, y, x * y - std::sqrt(2.0);
-    }
-  m.F.resize(2 * (nx - 1) * (ny - 1), 3);
-  int f = 0;
-  for (int j = 0; j + 1 < ny; ++j)
-    for (int i = 0; i + 1 < nx; ++i) {
-      const int a = j * nx + i, b = a + 1, c = a + nx + 1, d = a + nx;
-      m.F.row(f++) << a, b, c;
-      m.F.row(f++) << a, c, d;
-    }
-  return m;
-}
+Mesh saddle() { return testing::saddle_mesh(5, 4); }
 
 Patch make_patch(int id, char tip, double x0) {
   Patch p;
