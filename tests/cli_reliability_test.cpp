@@ -89,6 +89,36 @@ TEST(OutputSet, CommitIsAllOrNothing) {
   fs::remove_all(dir);
 }
 
+// A file of the earlier set that this run does not write (report.html under --no-report)
+// goes at commit, and comes back if the commit fails.
+TEST(OutputSet, StaleFilesGoWithTheEarlierSet) {
+  const fs::path dir = fs::temp_directory_path() / ("flank_outset_stale_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  for (const char* n : {"a.txt", "report.html"}) std::ofstream(dir / n) << "old " << n;
+  {
+    flank::io::OutputSet set(dir, {"a.txt", "b.txt"}, {"report.html"});
+    flank::io::write_file_atomic(set.staged("a.txt"), [](std::ostream& o) { o << "new a"; });
+    flank::io::write_file_atomic(set.staged("b.txt"), [](std::ostream& o) { o << "new b"; });
+    fs::create_directories(dir / "b.txt" / "x");  // the commit fails
+    EXPECT_THROW(set.commit(), flank::io::Error);
+  }
+  EXPECT_EQ(slurp(dir / "report.html"), "old report.html");
+  EXPECT_EQ(slurp(dir / "a.txt"), "old a.txt");
+  fs::remove_all(dir / "b.txt");
+  {
+    flank::io::OutputSet set(dir, {"a.txt"}, {"report.html"});
+    flank::io::write_file_atomic(set.staged("a.txt"), [](std::ostream& o) { o << "new a"; });
+    set.commit();
+  }
+  EXPECT_EQ(slurp(dir / "a.txt"), "new a");
+  EXPECT_FALSE(fs::exists(dir / "report.html"));
+  // A folder in a stale file's place is refused before any work.
+  fs::create_directories(dir / "report.html");
+  EXPECT_THROW(flank::io::OutputSet(dir, {"a.txt"}, {"report.html"}), flank::io::Error);
+  fs::remove_all(dir);
+}
+
 // Row 2: symlinks planted at the output names are replaced, never written through.
 TEST_F(Reliability, PlantedSymlinksAreNotFollowed) {
   const fs::path out = dir_ / "o";
