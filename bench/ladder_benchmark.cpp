@@ -8,9 +8,13 @@
 // 2k to 535k triangles on exactly the same surface. Names:
 //   Ladder/<stage>/<part>/tri_k:<thousands of triangles>/threads:<1|2>
 // Stages:
-//   index      BVH and adjacency build.
+//   index      search tree (oriented boxes, kernels/obb_tree.h) and adjacency build.
 //   query      raw cold closest points (batch, no hints) at the sample points of the scoring
 //              lines: the limit the other stages are measured against.
+//   query_warm the same points line by line, each warm-started from the previous sample's
+//              footpoint face (coherent queries, as movability and the fit ask them).
+//   query_embree  the same points cold through Embree's BVH (QueryEngine::kEmbree): the
+//              reference rate the box tree is judged against.
 //   scoring    candidate-line movability, 2048 lines × 30 samples, warm hints along a line,
 //              lines in parallel, as decompose issues them.
 //   fit        one Gauss–Newton motion fit from a perturbed start; GN time shares.
@@ -84,6 +88,7 @@ const Mesh& blade_base() {
 struct RungData {
   Mesh mesh;
   std::unique_ptr<SurfaceIndex> index;
+  std::unique_ptr<SurfaceIndex> embree;  // built by the first query_embree benchmark
 };
 
 // What a part's rungs share: the scoring lines, their sample points, the fit start.
@@ -99,7 +104,7 @@ struct PartData {
 
 std::mutex cache_mutex;
 
-const RungData& rung_data(const Rung& r) {
+RungData& rung_data(const Rung& r) {
   static std::map<std::pair<int, int>, std::unique_ptr<RungData>> cache;
   const std::lock_guard lock(cache_mutex);
   auto& slot = cache[{static_cast<int>(r.part), r.level}];
@@ -213,6 +218,14 @@ void bench_index(benchmark::State& state, Rung r, int threads) {
   state.counters["triangles"] = static_cast<double>(mesh.face_count());
 }
 
+void query_counters(benchmark::State& state, const SurfaceIndex& index, Eigen::Index rows) {
+  const auto queries = static_cast<double>(rows);
+  state.counters["triangles"] = static_cast<double>(index.mesh().face_count());
+  state.counters["queries"] = queries;
+  state.counters["queries_per_s"] =
+      benchmark::Counter(queries * static_cast<double>(state.iterations()), benchmark::Counter::kIsRate);
+}
+
 void bench_query(benchmark::State& state, Rung r, int threads) {
   const SurfaceIndex& index = *rung_data(r).index;
   const PartData& p = part_data(r.part);
@@ -221,11 +234,45 @@ void bench_query(benchmark::State& state, Rung r, int threads) {
     const std::vector<ClosestPoint> cp = index.closest_points(p.samples);
     benchmark::DoNotOptimize(cp.data());
   }
-  const double queries = static_cast<double>(p.samples.rows());
-  state.counters["triangles"] = static_cast<double>(index.mesh().face_count());
-  state.counters["queries"] = queries;
-  state.counters["queries_per_s"] =
-      benchmark::Counter(queries * static_cast<double>(state.iterations()), benchmark::Counter::kIsRate);
+  query_counters(state, index, p.samples.rows());
+}
+
+void bench_query_warm(benchmark::State& state, Rung r, int threads) {
+  const SurfaceIndex& index = *rung_data(r).index;
+  const PartData& p = part_data(r.part);
+  const ThreadLimit limit(threads);
+  const auto lines = static_cast<std::size_t>(p.samples.rows() / kSamples);
+  std::vector<int> faces(static_cast<std::size_t>(p.samples.rows()));
+  for (auto _ : state) {
+    parallel_for(0, lines, [&](std::size_t b, std::size_t e) {
+      for (std::size_t l = b; l < e; ++l) {
+        int hint = -1;
+        for (int i = 0; i < kSamples; ++i) {
+          const auto row = static_cast<Eigen::Index>(l * kSamples + static_cast<std::size_t>(i));
+          hint = index.closest_point(p.samples.row(row), hint).face;
+          faces[static_cast<std::size_t>(row)] = hint;
+        }
+      }
+    }, 16);
+    benchmark::DoNotOptimize(faces.data());
+  }
+  query_counters(state, index, p.samples.rows());
+}
+
+void bench_query_embree(benchmark::State& state, Rung r, int threads) {
+  RungData& d = rung_data(r);
+  {
+    const std::lock_guard lock(cache_mutex);
+    if (!d.embree) d.embree = std::make_unique<SurfaceIndex>(d.mesh, QueryEngine::kEmbree);
+  }
+  const SurfaceIndex& index = *d.embree;
+  const PartData& p = part_data(r.part);
+  const ThreadLimit limit(threads);
+  for (auto _ : state) {
+    const std::vector<ClosestPoint> cp = index.closest_points(p.samples);
+    benchmark::DoNotOptimize(cp.data());
+  }
+  query_counters(state, index, p.samples.rows());
 }
 
 void bench_scoring(benchmark::State& state, Rung r, int threads) {
@@ -284,9 +331,10 @@ void register_ladder_benchmarks() {
     std::cerr << "ladder: the blade rungs are left out: " << e.what() << "\n";
   }
   using Fn = void (*)(benchmark::State&, Rung, int);
-  const std::pair<const char*, Fn> stages[] = {{"index", bench_index}, {"query", bench_query},
-                                               {"scoring", bench_scoring}, {"fit", bench_fit},
-                                               {"decompose", bench_decompose}};
+  const std::pair<const char*, Fn> stages[] = {
+      {"index", bench_index},          {"query", bench_query},     {"query_warm", bench_query_warm},
+      {"query_embree", bench_query_embree}, {"scoring", bench_scoring}, {"fit", bench_fit},
+      {"decompose", bench_decompose}};
   // Rung by rung, so that each mesh is built once.
   for (const Rung& r : rungs)
     for (const auto& [stage, fn] : stages)

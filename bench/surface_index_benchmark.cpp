@@ -1,6 +1,7 @@
 // Closest-point queries on a smooth height field, as movability and fitting issue them:
 // lines of 30 samples about 5 mm above Φ, cold (no hint) or warm-started from the previous
-// sample's footpoint face; sizes × threads.
+// sample's footpoint face; sizes × threads × engine (0: our box tree, 1: Embree, the
+// reference rate: "raw cold Embree" is engine 1 with warm 0).
 #include <benchmark/benchmark.h>
 
 #include <cmath>
@@ -8,6 +9,7 @@
 #include <memory>
 #include <numbers>
 #include <random>
+#include <utility>
 #include <vector>
 
 #include "kernels/parallel.h"
@@ -67,20 +69,25 @@ struct Workload {
   Points queries;
 };
 
-const Workload& workload(int triangles_k) {
-  static std::map<int, Workload> cache;
-  auto it = cache.find(triangles_k);
+QueryEngine engine_arg(std::int64_t arg) {
+  return arg == 1 ? QueryEngine::kEmbree : QueryEngine::kBoxTree;
+}
+
+const Workload& workload(int triangles_k, QueryEngine engine = QueryEngine::kBoxTree) {
+  static std::map<std::pair<int, QueryEngine>, Workload> cache;
+  const auto key = std::make_pair(triangles_k, engine);
+  auto it = cache.find(key);
   if (it == cache.end()) {
-    Workload w{std::make_unique<SurfaceIndex>(wavy_grid(triangles_k)), line_queries(1234)};
-    it = cache.emplace(triangles_k, std::move(w)).first;
+    Workload w{std::make_unique<SurfaceIndex>(wavy_grid(triangles_k), engine), line_queries(1234)};
+    it = cache.emplace(key, std::move(w)).first;
   }
   return it->second;
 }
 
-// Args: {triangles_k, threads, warm}. One task walks a line; warm passes the previous
+// Args: {triangles_k, threads, warm, engine}. One task walks a line; warm passes the previous
 // footpoint face as the hint.
 void BM_ClosestPoints(benchmark::State& state) {
-  const Workload& w = workload(static_cast<int>(state.range(0)));
+  const Workload& w = workload(static_cast<int>(state.range(0)), engine_arg(state.range(3)));
   const ThreadLimit limit(static_cast<int>(state.range(1)));
   const bool warm = state.range(2) != 0;
   const SurfaceIndex& index = *w.index;
@@ -107,21 +114,14 @@ void BM_ClosestPoints(benchmark::State& state) {
   state.counters["triangles"] = static_cast<double>(index.mesh().face_count());
 }
 BENCHMARK(BM_ClosestPoints)
-    ->ArgNames({"tri_k", "threads", "warm"})
-    ->Args({13, 1, 0})
-    ->Args({13, 1, 1})
-    ->Args({13, 2, 0})
-    ->Args({13, 2, 1})
-    ->Args({300, 1, 0})
-    ->Args({300, 1, 1})
-    ->Args({300, 2, 0})
-    ->Args({300, 2, 1})
+    ->ArgNames({"tri_k", "threads", "warm", "engine"})
+    ->ArgsProduct({{13, 300}, {1, 2}, {0, 1}, {0, 1}})
     ->UseRealTime()
     ->Unit(benchmark::kMillisecond);
 
-// The batch API (cold, parallel over queries). Args: {triangles_k, threads}.
+// The batch API (cold, parallel over queries). Args: {triangles_k, threads, engine}.
 void BM_ClosestPointsBatch(benchmark::State& state) {
-  const Workload& w = workload(static_cast<int>(state.range(0)));
+  const Workload& w = workload(static_cast<int>(state.range(0)), engine_arg(state.range(2)));
   const ThreadLimit limit(static_cast<int>(state.range(1)));
   for (auto _ : state) {
     std::vector<ClosestPoint> out = w.index->closest_points(w.queries);
@@ -130,27 +130,25 @@ void BM_ClosestPointsBatch(benchmark::State& state) {
   state.SetItemsProcessed(state.iterations() * w.queries.rows());
 }
 BENCHMARK(BM_ClosestPointsBatch)
-    ->ArgNames({"tri_k", "threads"})
-    ->Args({13, 1})
-    ->Args({13, 2})
-    ->Args({300, 1})
-    ->Args({300, 2})
+    ->ArgNames({"tri_k", "threads", "engine"})
+    ->ArgsProduct({{13, 300}, {1, 2}, {0, 1}})
     ->UseRealTime()
     ->Unit(benchmark::kMillisecond);
 
-// BVH build (RTC_BUILD_QUALITY_HIGH) plus adjacency. Args: {triangles_k}.
+// The search structure's build plus adjacency: the box tree, or Embree's BVH
+// (RTC_BUILD_QUALITY_HIGH). Args: {triangles_k, engine}.
 void BM_SurfaceIndexBuild(benchmark::State& state) {
   const Mesh mesh = wavy_grid(static_cast<int>(state.range(0)));
+  const QueryEngine engine = engine_arg(state.range(1));
   for (auto _ : state) {
-    SurfaceIndex index(mesh);
+    SurfaceIndex index(mesh, engine);
     benchmark::DoNotOptimize(&index);
   }
   state.SetItemsProcessed(state.iterations() * mesh.face_count());
 }
 BENCHMARK(BM_SurfaceIndexBuild)
-    ->ArgName("tri_k")
-    ->Arg(13)
-    ->Arg(300)
+    ->ArgNames({"tri_k", "engine"})
+    ->ArgsProduct({{13, 300}, {0, 1}})
     ->UseRealTime()
     ->Unit(benchmark::kMillisecond);
 

@@ -13,6 +13,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "kernels/obb_tree.h"
 #include "kernels/parallel.h"
 
 namespace flank {
@@ -188,6 +189,10 @@ struct SurfaceIndex::Impl {
   Mesh mesh;
   Points normals;
   std::vector<Triangle> triangles;          // per face, double precision, for the exact callback
+  QueryEngine engine = QueryEngine::kBoxTree;
+  ObbTree tree;                             // kBoxTree
+  std::vector<Triangle> leaf_triangles;     // kBoxTree: triangles in tree.order(), contiguous
+  std::vector<int> leaf_faces;              // kBoxTree: their faces
   std::vector<std::uint8_t> edge_boundary;  // per face, bit k: edge (k, k+1 mod 3) is a boundary
   std::vector<std::uint8_t> vertex_boundary;
   Vec3 origin = Vec3::Zero();  // bbox centre; Embree gets coordinates relative to it
@@ -216,6 +221,7 @@ struct SurfaceIndex::Impl {
 
   void build_adjacency();
   void build_scene();
+  void build_tree(double pad);
 
   ClosestPoint query(const Vec3& p, int hint_face) const;
   ClosestPoint query_once(const Vec3& p, int hint_face) const;
@@ -305,9 +311,9 @@ struct QueryState {
 
   // Exact distance to face f; keeps the lexicographic minimum of (distance², face), so the
   // answer does not depend on the visiting order (hint or not, BVH order).
-  bool consider(int f) {
+  bool consider(int f) { return consider(f, triangles[f]); }
+  bool consider(int f, const Triangle& t) {
     int region = 0;
-    const Triangle& t = triangles[f];
     // d² ≥ lb² > best_d2: the triangle can neither win nor tie.
     const double lb = (p - t.centre).norm() - t.radius;
     if (lb > 0.0 && lb * lb > best_d2) return false;
@@ -369,9 +375,16 @@ ClosestPoint SurfaceIndex::Impl::query_once(const Vec3& p, int hint_face) const 
     state.consider(hint_face);
     q.radius = search_radius(std::sqrt(state.best_d2), slack);
   }
-  RTCPointQueryContext context;
-  rtcInitPointQueryContext(&context);
-  rtcPointQuery(scene, &q, &context, &point_query_callback, &state);
+  if (engine == QueryEngine::kEmbree) {
+    RTCPointQueryContext context;
+    rtcInitPointQueryContext(&context);
+    rtcPointQuery(scene, &q, &context, &point_query_callback, &state);
+  } else {
+    tree.nearest(p, state.best_d2, [&](std::int32_t i) {
+      state.consider(leaf_faces[static_cast<std::size_t>(i)],
+                     leaf_triangles[static_cast<std::size_t>(i)]);
+    });
+  }
   if (state.best_face == kNoFace) return out;
 
   const int f = state.best_face;
@@ -399,8 +412,10 @@ ClosestPoint SurfaceIndex::Impl::query_once(const Vec3& p, int hint_face) const 
   return out;
 }
 
-SurfaceIndex::SurfaceIndex(const Mesh& mesh) : impl_(std::make_unique<Impl>()) {
+SurfaceIndex::SurfaceIndex(const Mesh& mesh, QueryEngine engine)
+    : impl_(std::make_unique<Impl>()) {
   Impl& m = *impl_;
+  m.engine = engine;
   m.mesh = mesh;
   m.normals = face_normals(mesh);
   const BoundingBox box = bounding_box(mesh);
@@ -425,7 +440,21 @@ SurfaceIndex::SurfaceIndex(const Mesh& mesh) : impl_(std::make_unique<Impl>()) {
                (1.0 + 1e-12) + 1e-300;
   }
   m.build_adjacency();
-  m.build_scene();
+  if (engine == QueryEngine::kEmbree)
+    m.build_scene();
+  else
+    m.build_tree(1e-12 * scale);
+}
+
+void SurfaceIndex::Impl::build_tree(double pad) {
+  std::vector<std::array<Vec3, 3>> corners(triangles.size());
+  for (std::size_t f = 0; f < triangles.size(); ++f)
+    corners[f] = {triangles[f].a, triangles[f].b, triangles[f].c};
+  tree = ObbTree(corners, pad);
+  leaf_faces = tree.order();
+  leaf_triangles.resize(leaf_faces.size());
+  for (std::size_t i = 0; i < leaf_faces.size(); ++i)
+    leaf_triangles[i] = triangles[static_cast<std::size_t>(leaf_faces[i])];
 }
 
 SurfaceIndex::~SurfaceIndex() = default;
@@ -434,6 +463,7 @@ SurfaceIndex& SurfaceIndex::operator=(SurfaceIndex&&) noexcept = default;
 
 const Mesh& SurfaceIndex::mesh() const { return impl_->mesh; }
 double SurfaceIndex::diagonal() const { return impl_->diagonal; }
+QueryEngine SurfaceIndex::engine() const { return impl_->engine; }
 const Points& SurfaceIndex::normals() const { return impl_->normals; }
 
 bool SurfaceIndex::is_boundary_vertex(int v) const {

@@ -1,5 +1,5 @@
-// Closest points on the design surface Φ (DESIGN "Closest points"): an Embree BVH queried
-// with rtcPointQuery and an exact point–triangle callback in double precision.
+// Closest points on the design surface Φ (DESIGN "Closest points"): a tree of oriented boxes
+// (or Embree's BVH) searched with an exact point–triangle test in double precision.
 #pragma once
 
 #include <memory>
@@ -24,10 +24,22 @@ struct ClosestPoint {
   bool on_boundary = false;
 };
 
+// How queries search Φ. Both give the same answers, bit for bit (the exact minimum of
+// (distance², face) over all faces).
+enum class QueryEngine {
+  // Our tree of oriented boxes (kernels/obb_tree.h): a query's cost grows with
+  // log(triangles), and a hint face leaves little to visit. The default.
+  kBoxTree,
+  // Embree's BVH of axis-aligned boxes with rtcPointQuery: the reference, kept for the
+  // tests and benchmarks that compare with it.
+  kEmbree,
+};
+
 class SurfaceIndex {
  public:
-  // Builds the BVH over a copy of `mesh` (which must be valid: see io::read_mesh).
-  explicit SurfaceIndex(const Mesh& mesh);
+  // Builds the search structure over a copy of `mesh` (which must be valid: see
+  // io::read_mesh).
+  explicit SurfaceIndex(const Mesh& mesh, QueryEngine engine = QueryEngine::kBoxTree);
   ~SurfaceIndex();
   SurfaceIndex(SurfaceIndex&&) noexcept;
   SurfaceIndex& operator=(SurfaceIndex&&) noexcept;
@@ -38,6 +50,7 @@ class SurfaceIndex {
   double diagonal() const;          // bounding-box diagonal of Φ
   const Points& normals() const;    // #F by 3 unit face normals
   bool is_boundary_vertex(int v) const;
+  QueryEngine engine() const;
 
   // One query. `hint_face` (a previous footpoint's face, or -1) bounds the search radius
   // by the exact distance to that face: the warm start for coherent queries.

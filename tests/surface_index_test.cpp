@@ -150,8 +150,10 @@ void expect_same(const ClosestPoint& a, const ClosestPoint& b) {
 }
 
 // Brute force agreement, with no hint, random hints and the true face as hint.
-void check_against_brute_force(const Mesh& m, const Points& Q, unsigned seed) {
-  const SurfaceIndex index(m);
+void check_against_brute_force(const Mesh& m, const Points& Q, unsigned seed,
+                               QueryEngine engine) {
+  SCOPED_TRACE(engine == QueryEngine::kEmbree ? "Embree" : "box tree");
+  const SurfaceIndex index(m, engine);
   std::mt19937 rng(seed);
   std::uniform_int_distribution<int> face(0, m.face_count() - 1);
   const double scale = index.diagonal();
@@ -180,6 +182,11 @@ void check_against_brute_force(const Mesh& m, const Points& Q, unsigned seed) {
     expect_same(true_hint, cp);
   }
   EXPECT_EQ(mismatches, 0);
+}
+
+void check_against_brute_force(const Mesh& m, const Points& Q, unsigned seed) {
+  for (const QueryEngine engine : {QueryEngine::kBoxTree, QueryEngine::kEmbree})
+    check_against_brute_force(m, Q, seed, engine);
 }
 
 Vec3 unit_normal(const Vec3& a, const Vec3& b, const Vec3& c) {

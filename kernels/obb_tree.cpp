@@ -1,0 +1,153 @@
+#include "kernels/obb_tree.h"
+
+#include <Eigen/Eigenvalues>
+
+#include <algorithm>
+#include <limits>
+#include <numeric>
+#include <utility>
+
+#include "kernels/parallel.h"
+
+namespace flank {
+
+namespace {
+
+constexpr int kLeafItems = 16;
+// Subtrees larger than this build their two halves concurrently (into their own node lists,
+// joined after): a few levels at the top, so the copies of the join stay small.
+constexpr int kParallelItems = 16384;
+
+// First and second moments of a triangle's corners, relative to the bounding box's centre
+// (so that the covariance of a small node far from the origin does not cancel away).
+struct Moments {
+  Vec3 sum = Vec3::Zero();  // Σ v
+  std::array<double, 6> outer{};  // Σ v vᵀ: xx, yy, zz, xy, xz, yz
+};
+
+struct Builder {
+  std::span<const std::array<Vec3, 3>> triangles;
+  std::span<int> items;
+  std::vector<Vec3> centroids;
+  std::vector<Moments> moments;
+  double pad = 0.0;
+  Vec3 origin = Vec3::Zero();
+
+  // The box of items[begin, end): principal axes of the corners (an orthonormal frame
+  // whatever the spread: a degenerate covariance falls back to the coordinate axes).
+  ObbNode box(int begin, int end) const {
+    Vec3 sum = Vec3::Zero();
+    std::array<double, 6> outer{};
+    for (int i = begin; i < end; ++i) {
+      const Moments& m = moments[static_cast<std::size_t>(items[static_cast<std::size_t>(i)])];
+      sum += m.sum;
+      for (int k = 0; k < 6; ++k) outer[static_cast<std::size_t>(k)] += m.outer[static_cast<std::size_t>(k)];
+    }
+    const double n = 3.0 * (end - begin);
+    const Vec3 mean_rel = sum / n;
+    Mat3 cov;
+    cov << outer[0], outer[3], outer[4], outer[3], outer[1], outer[5], outer[4], outer[5], outer[2];
+    cov = cov / n - mean_rel * mean_rel.transpose();
+    const Vec3 mean = mean_rel + origin;
+    ObbNode node;
+    Eigen::SelfAdjointEigenSolver<Mat3> eig;
+    eig.computeDirect(cov);
+    // Eigenvalues ascend: axes[0] is across the surface, axes[2] along its longest spread.
+    const Vec3 u = eig.eigenvectors().col(2);
+    const Vec3 w = eig.eigenvectors().col(1);
+    Vec3 a2 = u.normalized();
+    Vec3 a1 = w - w.dot(a2) * a2;
+    a1.normalize();
+    const Vec3 a0 = a1.cross(a2);
+    if (a0.allFinite() && a1.allFinite() && a2.allFinite() && std::abs(a0.norm() - 1.0) < 1e-9)
+      node.axes = {a0, a1, a2};
+    Vec3 lo = Vec3::Constant(std::numeric_limits<double>::infinity());
+    Vec3 hi = -lo;
+    for (int i = begin; i < end; ++i)
+      for (const Vec3& v : triangles[static_cast<std::size_t>(items[static_cast<std::size_t>(i)])])
+        for (int k = 0; k < 3; ++k) {
+          const double x = node.axes[static_cast<std::size_t>(k)].dot(v - mean);
+          lo[k] = std::min(lo[k], x);
+          hi[k] = std::max(hi[k], x);
+        }
+    const Vec3 mid = 0.5 * (lo + hi);
+    node.centre = mean + mid[0] * node.axes[0] + mid[1] * node.axes[1] + mid[2] * node.axes[2];
+    node.half = 0.5 * (hi - lo) + Vec3::Constant(pad);
+    return node;
+  }
+
+  // Appends the subtree of items[begin, end) to `out` in pre-order; `keys` is scratch.
+  void build(std::vector<ObbNode>& out, int begin, int end,
+             std::vector<std::pair<double, int>>& keys) {
+    const std::size_t self = out.size();
+    out.push_back(box(begin, end));
+    if (end - begin <= kLeafItems) {
+      out[self].first = begin;
+      out[self].count = end - begin;
+      return;
+    }
+    // Median split of the centroids along the box's longest axis; ties by item index, so
+    // the halves do not depend on the order the items arrive in.
+    int axis = 0;
+    out[self].half.maxCoeff(&axis);
+    const Vec3 dir = out[self].axes[static_cast<std::size_t>(axis)];
+    const int mid = begin + (end - begin) / 2;
+    keys.resize(static_cast<std::size_t>(end - begin));
+    for (int i = begin; i < end; ++i) {
+      const int item = items[static_cast<std::size_t>(i)];
+      keys[static_cast<std::size_t>(i - begin)] = {dir.dot(centroids[static_cast<std::size_t>(item)]), item};
+    }
+    std::nth_element(keys.begin(), keys.begin() + (mid - begin), keys.end());
+    for (int i = begin; i < end; ++i) items[static_cast<std::size_t>(i)] = keys[static_cast<std::size_t>(i - begin)].second;
+    if (end - begin <= kParallelItems) {
+      build(out, begin, mid, keys);
+      out[self].right = static_cast<std::int32_t>(out.size() - self);
+      build(out, mid, end, keys);
+      return;
+    }
+    std::vector<ObbNode> halves[2];
+    parallel_invoke_each(2, [&](std::size_t h) {
+      std::vector<std::pair<double, int>> scratch;
+      if (h == 0)
+        build(halves[0], begin, mid, scratch);
+      else
+        build(halves[1], mid, end, scratch);
+    });
+    out.insert(out.end(), halves[0].begin(), halves[0].end());
+    out[self].right = static_cast<std::int32_t>(out.size() - self);
+    out.insert(out.end(), halves[1].begin(), halves[1].end());
+  }
+};
+
+}  // namespace
+
+ObbTree::ObbTree(std::span<const std::array<Vec3, 3>> triangles, double pad) {
+  const auto count = static_cast<int>(triangles.size());
+  order_.resize(triangles.size());
+  std::iota(order_.begin(), order_.end(), 0);
+  if (count == 0) return;
+  Builder b{triangles, order_, {}, {}, pad};
+  Vec3 lo = triangles[0][0], hi = lo;
+  for (const auto& t : triangles)
+    for (const Vec3& v : t) lo = lo.cwiseMin(v), hi = hi.cwiseMax(v);
+  b.origin = 0.5 * (lo + hi);
+  b.centroids.resize(triangles.size());
+  b.moments.resize(triangles.size());
+  parallel_for(0, triangles.size(), [&](std::size_t begin, std::size_t end) {
+    for (std::size_t f = begin; f < end; ++f) {
+      b.centroids[f] = (triangles[f][0] + triangles[f][1] + triangles[f][2]) / 3.0;
+      Moments& m = b.moments[f];
+      for (const Vec3& corner : triangles[f]) {
+        const Vec3 v = corner - b.origin;
+        m.sum += v;
+        m.outer[0] += v.x() * v.x(), m.outer[1] += v.y() * v.y(), m.outer[2] += v.z() * v.z();
+        m.outer[3] += v.x() * v.y(), m.outer[4] += v.x() * v.z(), m.outer[5] += v.y() * v.z();
+      }
+    }
+  }, 4096);
+  nodes_.reserve(2 * triangles.size() / kLeafItems + 2);
+  std::vector<std::pair<double, int>> keys;
+  b.build(nodes_, 0, count, keys);
+}
+
+}  // namespace flank
