@@ -3,6 +3,7 @@
 #include <Eigen/Eigenvalues>
 
 #include <algorithm>
+#include <cmath>
 #include <limits>
 #include <numeric>
 #include <utility>
@@ -13,7 +14,7 @@ namespace flank {
 
 namespace {
 
-constexpr int kLeafItems = 16;
+constexpr int kLeafItems = 8;
 // Subtrees larger than this build their two halves concurrently (into their own node lists,
 // joined after): a few levels at the top, so the copies of the join stay small.
 constexpr int kParallelItems = 16384;
@@ -119,6 +120,83 @@ struct Builder {
   }
 };
 
+// A float not below x: the nearest one, one step up (no comparison with x, which the compiler
+// may carry out in double: see set_half).
+float round_up(double x) {
+  return std::nextafter(static_cast<float>(x), std::numeric_limits<float>::infinity());
+}
+
+// Collapses the binary tree into nodes of up to four children (ObbWideNode).
+struct Collapser {
+  const std::vector<ObbNode>& nodes;
+  Vec3 origin;
+  std::vector<ObbWideNode>& wide;
+  std::vector<ObbLeaf>& leaves;
+
+  // The lane code of binary node n: a leaf's (negative) or a new wide node's index.
+  std::int32_t lane(std::int32_t n) {
+    const ObbNode& b = nodes[static_cast<std::size_t>(n)];
+    if (b.leaf()) {
+      leaves.push_back({b.first, b.count});
+      return -static_cast<std::int32_t>(leaves.size());
+    }
+    return node(n);
+  }
+
+  // Widens lane l's float box to hold the double `box`: the half extents are computed from the
+  // floats as stored. Not inlined on purpose: GCC 12 at -O3 (SLP vectorizer) was seen to
+  // forward the double values into a float→double round trip written right after the
+  // stores, dropping the rounding (tests/obb_tree_test.cpp WideFloatBoxesHoldTheirTriangles
+  // caught boxes 2e-7 of their size too small); a separate function only sees the floats.
+  [[gnu::noinline]] void set_half(ObbWideNode& w, int l, const ObbNode& box) const {
+    Vec3 cf, af[3];
+    for (int j = 0; j < 3; ++j) {
+      cf[j] = static_cast<double>(w.centre[j][l]);
+      for (int k = 0; k < 3; ++k) af[k][j] = static_cast<double>(w.axes[3 * k + j][l]);
+    }
+    const Vec3 centre = box.centre - origin;
+    for (int k = 0; k < 3; ++k) {
+      // The double box lies in the slab |af · (x − origin − cf)| ≤ this.
+      double reach = std::abs(af[k].dot(centre - cf));
+      for (int i = 0; i < 3; ++i) reach += std::abs(af[k].dot(box.axes[static_cast<std::size_t>(i)])) * box.half[i];
+      w.half[k][l] = round_up(reach * (1.0 + 1e-12));
+    }
+  }
+
+  // A wide node for inner binary node n: its grandchildren, or a child itself where that is
+  // a leaf.
+  std::int32_t node(std::int32_t n) {
+    std::int32_t lanes[ObbWideNode::kLanes];
+    int count = 0;
+    const ObbNode& b = nodes[static_cast<std::size_t>(n)];
+    for (const std::int32_t c : {n + 1, n + b.right}) {
+      const ObbNode& child = nodes[static_cast<std::size_t>(c)];
+      if (child.leaf()) {
+        lanes[count++] = c;
+      } else {
+        lanes[count++] = c + 1;
+        lanes[count++] = c + child.right;
+      }
+    }
+    const auto index = static_cast<std::int32_t>(wide.size());
+    wide.emplace_back();
+    ObbWideNode w{};
+    w.count = count;
+    for (int l = 0; l < count; ++l) {
+      const ObbNode& box = nodes[static_cast<std::size_t>(lanes[l])];
+      for (int j = 0; j < 3; ++j) {
+        w.centre[j][l] = static_cast<float>(box.centre[j] - origin[j]);
+        for (int k = 0; k < 3; ++k)
+          w.axes[3 * k + j][l] = static_cast<float>(box.axes[static_cast<std::size_t>(k)][j]);
+      }
+      set_half(w, l, box);
+    }
+    for (int l = 0; l < count; ++l) w.child[l] = lane(lanes[l]);
+    wide[static_cast<std::size_t>(index)] = w;
+    return index;
+  }
+};
+
 }  // namespace
 
 ObbTree::ObbTree(std::span<const std::array<Vec3, 3>> triangles, double pad) {
@@ -148,6 +226,14 @@ ObbTree::ObbTree(std::span<const std::array<Vec3, 3>> triangles, double pad) {
   nodes_.reserve(2 * triangles.size() / kLeafItems + 2);
   std::vector<std::pair<double, int>> keys;
   b.build(nodes_, 0, count, keys);
+
+  origin_ = b.origin;
+  scale_ = 0.5 * (hi - lo).norm();
+  Collapser c{nodes_, origin_, wide_, leaves_};
+  if (nodes_.front().leaf())
+    c.lane(0);
+  else
+    c.node(0);
 }
 
 }  // namespace flank

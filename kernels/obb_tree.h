@@ -12,6 +12,7 @@
 #include <array>
 #include <cmath>
 #include <cstdint>
+#include <limits>
 #include <span>
 #include <vector>
 
@@ -43,64 +44,129 @@ struct ObbNode {
   }
 };
 
+// The tree as queries walk it: every node holds the boxes of up to four children (two levels
+// of the binary tree) in single precision, side by side, so that one node costs a few cache
+// lines and its four tests run as one vector loop. Rounding is made safe twice: each float box
+// is widened to contain the double box it comes from, and a box is pruned only when it is
+// farther than the best distance by a margin larger than float evaluation error.
+struct ObbWideNode {
+  static constexpr int kLanes = 4;
+  float centre[3][kLanes];
+  float axes[9][kLanes];  // axis k, component j at [3 k + j]
+  float half[3][kLanes];
+  // Per lane: >= 0 an inner node's index; < 0 a leaf, leaves()[-1 - child].
+  std::int32_t child[kLanes];
+  std::int32_t count;  // lanes in use, 2 to 4
+};
+
+struct ObbLeaf {
+  std::int32_t first;
+  std::int32_t count;
+};
+
 class ObbTree {
  public:
   ObbTree() = default;
   // Builds over triangles given as 3 corners each; `pad` (≥ 0) widens every box so that
-  // rounding in lower_bound2 never cuts off a triangle (a few 1e-13 of the coordinates'
-  // magnitude is plenty). Deterministic whatever the thread count.
+  // rounding never cuts off a triangle (a few 1e-13 of the coordinates' magnitude is
+  // plenty). Deterministic whatever the thread count.
   ObbTree(std::span<const std::array<Vec3, 3>> triangles, double pad);
 
+  // The binary tree in pre-order, in double precision (what the wide nodes are made from).
   const std::vector<ObbNode>& nodes() const { return nodes_; }
   // Item (triangle) indices in leaf order.
   const std::vector<int>& order() const { return order_; }
+  // The tree as queries walk it (node 0 is the root unless the whole tree is one leaf), its
+  // leaves, and the point its float boxes are relative to.
+  const std::vector<ObbWideNode>& wide_nodes() const { return wide_; }
+  const std::vector<ObbLeaf>& leaves() const { return leaves_; }
+  const Vec3& origin() const { return origin_; }
 
-  // Depth-first, nearer child first. `visit(position)` is called for every leaf item whose
-  // box is not farther than `best_d2` (position indexes order()); it may lower best_d2.
-  // Boxes are pruned only when strictly farther, so every item at the minimum distance is
-  // visited: ties can be broken by the caller independently of the visiting order.
+  // Depth-first, nearest box first. `visit(position)` is called for every leaf item whose
+  // box may hold a point not farther than √best_d2 (position indexes order()); it may lower
+  // best_d2. Boxes are pruned only when certainly farther, so every item at the minimum
+  // distance is visited: ties can be broken by the caller independently of the visiting
+  // order.
   template <class Visit>
   void nearest(const Vec3& p, double& best_d2, Visit&& visit) const;
 
  private:
+  // The squared pruning distance in float: √best_d2 widened by the float error bound.
+  float threshold(double best_d2, double query_scale) const;
+
   std::vector<ObbNode> nodes_;
   std::vector<int> order_;
+  std::vector<ObbWideNode> wide_;
+  std::vector<ObbLeaf> leaves_;
+  Vec3 origin_ = Vec3::Zero();  // wide boxes are relative to it
+  double scale_ = 0.0;          // the coordinates' magnitude about origin_
 };
+
+inline float ObbTree::threshold(double best_d2, double query_scale) const {
+  if (!(best_d2 < std::numeric_limits<double>::infinity())) return std::numeric_limits<float>::infinity();
+  // Float evaluation of a lane errs by under 1e-6 of (|p − origin| + box distance + scale);
+  // 1e-5 of each is a tenfold margin.
+  const double r = std::sqrt(best_d2) * (1.0 + 1e-5) + 1e-5 * (scale_ + query_scale);
+  const double t = r * r * (1.0 + 1e-6);
+  return t < static_cast<double>(std::numeric_limits<float>::max()) ? static_cast<float>(t)
+                                                                    : std::numeric_limits<float>::infinity();
+}
 
 template <class Visit>
 void ObbTree::nearest(const Vec3& p, double& best_d2, Visit&& visit) const {
-  if (nodes_.empty()) return;
+  if (wide_.empty()) {
+    if (leaves_.size() == 1)  // a tree of one leaf
+      for (std::int32_t i = leaves_[0].first; i < leaves_[0].first + leaves_[0].count; ++i) visit(i);
+    return;
+  }
+  const Vec3 rel = p - origin_;
+  const double query_scale = rel.norm();
+  const float px = static_cast<float>(rel.x()), py = static_cast<float>(rel.y()),
+              pz = static_cast<float>(rel.z());
+  float thr = threshold(best_d2, query_scale);
   struct Entry {
-    std::int32_t node;
-    double lb2;
+    std::int32_t child;
+    float lb2;
   };
-  // Median splits keep the depth at ⌈log2(items)⌉ + 1; one entry per level is pending.
-  Entry stack[96];
+  // Each node pushes at most 3 entries and the depth is ⌈log4(leaves)⌉ + 1.
+  Entry stack[3 * 40];
   int top = 0;
-  stack[top++] = {0, nodes_[0].lower_bound2(p)};
+  stack[top++] = {0, 0.0f};
   while (top > 0) {
     const Entry e = stack[--top];
-    if (e.lb2 > best_d2) continue;
-    std::int32_t n = e.node;
-    // Descend towards the nearer child, leaving the farther one on the stack.
-    while (!nodes_[static_cast<std::size_t>(n)].leaf()) {
-      const std::int32_t a = n + 1;
-      const std::int32_t b = n + nodes_[static_cast<std::size_t>(n)].right;
-      const double la = nodes_[static_cast<std::size_t>(a)].lower_bound2(p);
-      const double lb = nodes_[static_cast<std::size_t>(b)].lower_bound2(p);
-      const bool a_first = la <= lb;
-      const std::int32_t near = a_first ? a : b, far = a_first ? b : a;
-      const double lnear = a_first ? la : lb, lfar = a_first ? lb : la;
-      if (lfar <= best_d2) stack[top++] = {far, lfar};
-      if (lnear > best_d2) {
-        n = -1;
-        break;
-      }
-      n = near;
+    if (e.lb2 > thr) continue;
+    if (e.child < 0) {
+      const ObbLeaf& leaf = leaves_[static_cast<std::size_t>(-1 - e.child)];
+      for (std::int32_t i = leaf.first; i < leaf.first + leaf.count; ++i) visit(i);
+      thr = threshold(best_d2, query_scale);
+      continue;
     }
-    if (n < 0) continue;
-    const ObbNode& leaf = nodes_[static_cast<std::size_t>(n)];
-    for (std::int32_t i = leaf.first; i < leaf.first + leaf.count; ++i) visit(i);
+    const ObbWideNode& n = wide_[static_cast<std::size_t>(e.child)];
+    float lb[ObbWideNode::kLanes];
+    for (int l = 0; l < ObbWideNode::kLanes; ++l) {
+      const float dx = px - n.centre[0][l], dy = py - n.centre[1][l], dz = pz - n.centre[2][l];
+      float sum = 0.0f;
+      for (int k = 0; k < 3; ++k) {
+        const float x = n.axes[3 * k][l] * dx + n.axes[3 * k + 1][l] * dy + n.axes[3 * k + 2][l] * dz;
+        const float excess = std::max(std::abs(x) - n.half[k][l], 0.0f);
+        sum += excess * excess;
+      }
+      lb[l] = sum;
+    }
+    // The lanes within reach, nearest last on the stack (popped first).
+    Entry near[ObbWideNode::kLanes];
+    int m = 0;
+    for (int l = 0; l < n.count; ++l) {
+      if (lb[l] > thr) continue;
+      Entry x{n.child[l], lb[l]};
+      int j = m++;
+      while (j > 0 && near[j - 1].lb2 < x.lb2) {
+        near[j] = near[j - 1];
+        --j;
+      }
+      near[j] = x;
+    }
+    for (int j = 0; j < m; ++j) stack[top++] = near[j];
   }
 }
 

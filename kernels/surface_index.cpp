@@ -95,12 +95,26 @@ inline Vec3 closest_on_triangle(const Vec3& p, const Vec3& a, const Vec3& b, con
 
 struct Triangle {
   Vec3 a, b, c;
-  // A ball around the triangle: |p − centre| − radius is a lower bound of the distance, a
-  // cheap test that spares the exact one for most triangles a query visits. Query points sit
-  // a cutter radius above Φ, so the leaves around the footpoint that Embree must visit hold
-  // tens of triangles, nearly all farther than the best found.
+  // A disc around the triangle in its own plane (a slab `thickness` thick, for the rounding
+  // of the corners): the distance to the disc is a lower bound of the distance, a cheap test
+  // that spares the exact one for most triangles a query visits. Query points sit a cutter
+  // radius above Φ: the neighbours of the footpoint triangle are nearly as far as it is from
+  // their plane, and it is the in-plane gap that tells them apart, which a ball around the
+  // triangle does not see.
   Vec3 centre;
+  Vec3 normal;  // unit, or zero for a degenerate triangle (the disc is then a ball)
   double radius;
+  double thickness;
+
+  // A lower bound of |p − x|² over the triangle, safe against rounding (see consider()).
+  double lower_bound2(const Vec3& p) const {
+    const Vec3 d = p - centre;
+    const double h = normal.dot(d);
+    const double rho = (d - h * normal).norm();
+    const double across = std::max(std::abs(h) - thickness, 0.0);
+    const double along = std::max(rho - radius, 0.0);
+    return across * across + along * along;
+  }
 };
 
 // Embree reports errors through this sink; it never throws (it runs inside Embree). The
@@ -314,9 +328,10 @@ struct QueryState {
   bool consider(int f) { return consider(f, triangles[f]); }
   bool consider(int f, const Triangle& t) {
     int region = 0;
-    // d² ≥ lb² > best_d2: the triangle can neither win nor tie.
-    const double lb = (p - t.centre).norm() - t.radius;
-    if (lb > 0.0 && lb * lb > best_d2) return false;
+    // d² ≥ lb² > best_d2: the triangle can neither win nor tie. The bound's own rounding is
+    // under 1e-15 of (lb² + |p − centre|²); the margin is a thousandfold.
+    const double lb2 = t.lower_bound2(p);
+    if (lb2 > best_d2 && lb2 - best_d2 > 1e-12 * (lb2 + (p - t.centre).squaredNorm())) return false;
     const Vec3 q = closest_on_triangle(p, t.a, t.b, t.c, region);
     const double d2 = (p - q).squaredNorm();
     if (d2 < best_d2 || (d2 == best_d2 && f < best_face)) {
@@ -435,12 +450,19 @@ SurfaceIndex::SurfaceIndex(const Mesh& mesh, QueryEngine engine)
     t.b = mesh.V.row(mesh.F(f, 1));
     t.c = mesh.V.row(mesh.F(f, 2));
     t.centre = (t.a + t.b + t.c) / 3.0;
-    // Rounded up a little: the ball must contain the triangle whatever the rounding.
+    const Vec3 n = (t.b - t.a).cross(t.c - t.a);
+    const double area2 = n.norm();
+    t.normal = area2 > 0.0 && std::isfinite(area2) ? Vec3(n / area2) : Vec3::Zero();
+    // Rounded up a little: the disc must hold the triangle whatever the rounding.
     t.radius = std::max({(t.a - t.centre).norm(), (t.b - t.centre).norm(), (t.c - t.centre).norm()}) *
                (1.0 + 1e-12) + 1e-300;
+    t.thickness = t.normal == Vec3::Zero()
+                      ? 0.0
+                      : 2.0 * std::max({std::abs(t.normal.dot(t.a - t.centre)), std::abs(t.normal.dot(t.b - t.centre)),
+                                        std::abs(t.normal.dot(t.c - t.centre))}) + m.on_surface;
   }
   m.build_adjacency();
-  if (engine == QueryEngine::kEmbree)
+  if (m.engine == QueryEngine::kEmbree)
     m.build_scene();
   else
     m.build_tree(1e-12 * scale);

@@ -67,9 +67,10 @@ int depth(const ObbTree& tree, int n) {
 }
 
 TEST(ObbTree, EveryBoxHoldsItsTrianglesAndEveryTriangleIsOnce) {
-  const Mesh m = wavy_sheet(60);
+  Mesh m = wavy_sheet(60);
+  m.V.rowwise() += Eigen::RowVector3d(3e4, -1e4, 2e3);
   const auto tri = corners_of(m);
-  const ObbTree tree(tri, 0.0);
+  const ObbTree tree(tri, 1e-12 * m.V.cwiseAbs().maxCoeff());
   ASSERT_FALSE(tree.nodes().empty());
   std::vector<int> seen(tri.size(), 0);
   for (const int pos : tree.order()) ++seen[static_cast<std::size_t>(pos)];
@@ -91,6 +92,55 @@ TEST(ObbTree, EveryBoxHoldsItsTrianglesAndEveryTriangleIsOnce) {
   }
   // Median splits: depth ⌈log2(items / 4)⌉ + 1 at most.
   EXPECT_LE(depth(tree, 0), static_cast<int>(std::ceil(std::log2(tri.size() / 4.0))) + 2);
+}
+
+// The float boxes the queries test hold every corner below them, evaluated in double
+// precision (the float evaluation's own error is covered by the pruning margin).
+void expect_lane_holds(const ObbTree& tree, const std::vector<std::array<Vec3, 3>>& tri,
+                       const ObbWideNode& w, int lane, std::int32_t child, int& checked) {
+  std::vector<ObbLeaf> leaves;
+  std::vector<std::int32_t> pending{child};
+  while (!pending.empty()) {
+    const std::int32_t c = pending.back();
+    pending.pop_back();
+    if (c < 0) {
+      leaves.push_back(tree.leaves()[static_cast<std::size_t>(-1 - c)]);
+      continue;
+    }
+    const ObbWideNode& n = tree.wide_nodes()[static_cast<std::size_t>(c)];
+    for (int l = 0; l < n.count; ++l) pending.push_back(n.child[l]);
+  }
+  for (const ObbLeaf& leaf : leaves)
+    for (int i = leaf.first; i < leaf.first + leaf.count; ++i)
+      for (const Vec3& v : tri[static_cast<std::size_t>(tree.order()[static_cast<std::size_t>(i)])]) {
+        const Vec3 rel = v - tree.origin();
+        for (int k = 0; k < 3; ++k) {
+          double x = 0.0;
+          for (int j = 0; j < 3; ++j)
+            x += static_cast<double>(w.axes[3 * k + j][lane]) * (rel[j] - static_cast<double>(w.centre[j][lane]));
+          EXPECT_LE(std::abs(x), static_cast<double>(w.half[k][lane]));
+        }
+        ++checked;
+      }
+}
+
+TEST(ObbTree, WideFloatBoxesHoldTheirTriangles) {
+  Mesh m = wavy_sheet(40);
+  m.V.rowwise() += Eigen::RowVector3d(3e4, -1e4, 2e3);  // far from the origin: coarse floats
+  const auto tri = corners_of(m);
+  // The pad SurfaceIndex gives: 1e-12 of the coordinates' magnitude.
+  const ObbTree tree(tri, 1e-12 * m.V.cwiseAbs().maxCoeff());
+  ASSERT_FALSE(tree.wide_nodes().empty());
+  int checked = 0;
+  for (const ObbWideNode& w : tree.wide_nodes()) {
+    EXPECT_GE(w.count, 2);
+    EXPECT_LE(w.count, ObbWideNode::kLanes);
+    for (int l = 0; l < w.count; ++l) expect_lane_holds(tree, tri, w, l, w.child[l], checked);
+  }
+  EXPECT_GT(checked, 3 * static_cast<int>(tri.size()));  // every corner, at every level
+  int items = 0;
+  for (const ObbLeaf& leaf : tree.leaves()) items += leaf.count;
+  EXPECT_EQ(items, static_cast<int>(tri.size()));
 }
 
 // On a curved sheet the boxes hug the surface: a leaf box is far thinner across the surface
