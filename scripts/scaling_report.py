@@ -11,6 +11,11 @@ Reads Google Benchmark JSON (``flank_bench --benchmark_out=run.json
   check --json RUN.json --baseline BASE.json [--limit 0.10] [--noise-k 2]
       Compares median real times; exit 1 if a benchmark is slower than
       limit + noise_k * max(cv_run, cv_base), 2 if the inputs are unusable.
+  pairs --json RUN.json --baseline BASE.json [--limit 0.10]
+      Both files are ``merge`` outputs of the same number of processes, run
+      interleaved in one session (repetition i of each forms pair i). Exit 1 if
+      a benchmark's median per-pair ratio run/base exceeds 1 + limit and every
+      pair is slower by more than limit / 2; 2 if the inputs are unusable.
 
 Run with a Python that has matplotlib for ``report`` (Debian: /usr/bin/python3);
 ``check`` needs only the standard library.
@@ -821,6 +826,86 @@ def cmd_check(args):
     return 1 if failures else 0
 
 
+def pair_times(path):
+    """{key: {repetition_index: real seconds}} from a ``merge`` output; InputError if unusable."""
+    data = read_gb_json(path)
+    out = {}
+    for entry in data["benchmarks"]:
+        if not isinstance(entry, dict) or entry.get("error_occurred") or entry.get("skipped"):
+            continue
+        if entry.get("run_type", "iteration") != "iteration":
+            continue
+        seconds = _seconds(entry, "real_time")
+        index = entry.get("repetition_index")
+        if seconds is None or not isinstance(index, int):
+            continue
+        out.setdefault(benchmark_key(entry), {})[index] = seconds
+    if not out:
+        raise InputError(f"{path}: has no benchmarks")
+    return out
+
+
+def compare_pairs(run, base, limit):
+    """[(key, status, median ratio, min ratio, max ratio, pairs)], status ok/SLOWER/faster.
+
+    A benchmark is SLOWER when its median run/base ratio over the pairs exceeds 1 + limit and
+    every pair is slower by at least half the limit: one noisy pair can neither fail it nor
+    hide a regression that shows in all the others' median. (Two builds of the same source
+    differ by a few percent on the smallest rungs, from code layout alone: seen here on an
+    unchanged tree, 1.05-1.15 on a 40 ms benchmark.) Keys in only one side are left out (the
+    caller says so)."""
+    rows = []
+    for key in [k for k in run if k in base]:
+        common = sorted(set(run[key]) & set(base[key]))
+        ratios = [run[key][i] / base[key][i] for i in common if base[key][i] > 0]
+        if not ratios:
+            continue
+        med = statistics.median(ratios)
+        if med > 1 + limit and min(ratios) > 1 + limit / 2:
+            status = "SLOWER"
+        elif med < 1 - limit and max(ratios) < 1 - limit / 2:
+            status = "faster"
+        else:
+            status = "ok"
+        rows.append((key, status, med, min(ratios), max(ratios), len(ratios)))
+    return rows
+
+
+def cmd_pairs(args):
+    try:
+        run = pair_times(args.json)
+        base = pair_times(args.baseline)
+    except InputError as e:
+        print(f"{PROG} --check: {e}", file=sys.stderr)
+        return 2
+    common = [k for k in run if k in base]
+    if not common:
+        print(f"{PROG} --check: no benchmark of {args.json} is in {args.baseline}; "
+              "nothing to compare", file=sys.stderr)
+        return 2
+    for key in common:
+        if set(run[key]) != set(base[key]):
+            print(f"{PROG} --check: {key} has repetitions {sorted(run[key])} in {args.json} "
+                  f"but {sorted(base[key])} in {args.baseline}; the runs are not paired",
+                  file=sys.stderr)
+            return 2
+    rows = compare_pairs(run, base, args.limit)
+    pairs = max(n for *_, n in rows)
+    for key, status, med, lo, hi, _ in rows:
+        print(f"{status:<7} {key}  run/base median {med:.3f} (pairs {lo:.3f}-{hi:.3f})")
+    for key in sorted(set(run) ^ set(base)):
+        print(f"{'only in ' + ('run' if key in run else 'baseline'):<7} {key}")
+    failures = [r for r in rows if r[1] == "SLOWER"]
+    print(f"{PROG} --check: {len(rows)} benchmarks compared in {pairs} interleaved pairs, "
+          f"{len(failures)} slower than the baseline beyond {100 * args.limit:g}%")
+    sys.stdout.flush()
+    for key, _, med, lo, _, _ in failures:
+        print(f"{PROG} --check: {key} is {100 * (med - 1):.1f}% slower than the baseline "
+              f"(median of the pairs; every pair slower, the least by {100 * (lo - 1):.1f}%)",
+              file=sys.stderr)
+    return 1 if failures else 0
+
+
 def merge_runs(paths):
     """One Google Benchmark JSON document from several runs of the same binary, one process
     each: their iteration entries side by side, numbered as repetitions, so that the median
@@ -868,12 +953,18 @@ def main(argv=None):
                      help="allowed slow-down as a fraction (default 0.10)")
     chk.add_argument("--noise-k", type=float, default=2.0,
                      help="noise allowance = K x max(cv run, cv baseline) (default 2)")
+    prs = sub.add_parser("pairs", help="fail if a benchmark got slower than the baseline "
+                         "run interleaved with it")
+    prs.add_argument("--json", required=True, help="merged JSON of the run")
+    prs.add_argument("--baseline", required=True, help="merged JSON of the baseline")
+    prs.add_argument("--limit", type=float, default=0.10,
+                     help="allowed slow-down as a fraction (default 0.10)")
     mrg = sub.add_parser("merge", help="one JSON from runs of the benchmark binary, one "
                          "process per repetition")
     mrg.add_argument("-o", "--output", required=True, help="merged JSON file")
     mrg.add_argument("inputs", nargs="+", help="Google Benchmark JSON of each run")
     args = parser.parse_args(argv)
-    commands = {"report": cmd_report, "check": cmd_check, "merge": cmd_merge}
+    commands = {"report": cmd_report, "check": cmd_check, "pairs": cmd_pairs, "merge": cmd_merge}
     return commands[args.command](args)
 
 

@@ -146,6 +146,71 @@ class ScalingReportTest(unittest.TestCase):
         self.assertIn("bad.json", r.stderr)
         self.assertFalse(os.path.exists(merged))
 
+    # --- pairs (the paired check: baseline built beside, run interleaved) --------------------
+
+    def paired(self, name, times_ms, key=QUERY):
+        """A merge output: one iteration entry per repetition, as `merge` writes them."""
+        entries = [{"name": key + "/real_time", "run_name": key + "/real_time",
+                    "run_type": "iteration", "repetitions": len(times_ms),
+                    "repetition_index": i, "iterations": 10, "real_time": ms,
+                    "cpu_time": ms, "time_unit": "ms"} for i, ms in enumerate(times_ms)]
+        return self.write(name, {"context": {"num_cpus": 2}, "benchmarks": entries})
+
+    def pairs(self, run_ms, base_ms, *extra):
+        run = self.paired("run.json", run_ms)
+        base = self.paired("base.json", base_ms)
+        return self.run_cli("pairs", "--json", run, "--baseline", base, *extra)
+
+    def test_pairs_identical_pass(self):
+        r = self.pairs([10.0, 11.0, 9.5, 10.2], [10.0, 11.0, 9.5, 10.2])
+        self.assertEqual(r.returncode, 0, r.stderr)
+        self.assertIn("ok", r.stdout)
+        self.assertIn("1 benchmarks compared in 4 interleaved pairs, 0 slower", r.stdout)
+
+    def test_pairs_machine_slower_than_baseline_file_passes(self):
+        # Both sides slow together (another machine, a busy day): the ratios stay near 1.
+        r = self.pairs([14.0, 15.1, 13.3, 14.4], [14.1, 15.0, 13.2, 14.5])
+        self.assertEqual(r.returncode, 0, r.stderr)
+
+    def test_pairs_20_percent_slower_in_every_pair_fails(self):
+        r = self.pairs([12.0, 13.2, 11.4, 12.3], [10.0, 11.0, 9.5, 10.2])
+        self.assertEqual(r.returncode, 1, r.stdout)
+        self.assertIn("SLOWER", r.stdout)
+        self.assertIn(QUERY, r.stderr)
+        self.assertIn("20.0% slower", r.stderr)
+
+    def test_pairs_one_lucky_pair_passes(self):
+        # Median 20% slower, but one pair faster, or within half the limit: noise.
+        r = self.pairs([12.0, 9.0, 12.0, 12.0], [10.0, 10.0, 10.0, 10.0])
+        self.assertEqual(r.returncode, 0, r.stdout)
+        r = self.pairs([12.0, 10.4, 12.0, 12.0], [10.0, 10.0, 10.0, 10.0])
+        self.assertEqual(r.returncode, 0, r.stdout)
+
+    def test_pairs_5_percent_slower_passes_and_limit_tightens(self):
+        self.assertEqual(self.pairs([10.5] * 3, [10.0] * 3).returncode, 0)
+        self.assertEqual(self.pairs([10.5] * 3, [10.0] * 3, "--limit", "0.04").returncode, 1)
+
+    def test_pairs_faster_is_reported_not_failed(self):
+        r = self.pairs([7.0, 7.5, 7.2], [10.0, 10.0, 10.0])
+        self.assertEqual(r.returncode, 0, r.stderr)
+        self.assertIn("faster", r.stdout)
+
+    def test_pairs_mismatched_repetitions(self):
+        r = self.pairs([10.0, 10.0, 10.0], [10.0, 10.0])
+        self.assertEqual(r.returncode, 2)
+        self.assertIn("not paired", r.stderr)
+
+    def test_pairs_no_overlap_and_garbage(self):
+        run = self.paired("run.json", [10.0], key="Ladder/index/cone/tri_k:1/threads:1")
+        base = self.paired("base.json", [10.0])
+        r = self.run_cli("pairs", "--json", run, "--baseline", base)
+        self.assertEqual(r.returncode, 2)
+        self.assertIn("nothing to compare", r.stderr)
+        bad = self.write("bad.json", "{ truncated")
+        r = self.run_cli("pairs", "--json", run, "--baseline", bad)
+        self.assertEqual(r.returncode, 2)
+        self.assertIn("bad.json", r.stderr)
+
     # --- check -----------------------------------------------------------------------------
 
     def test_check_identical_passes(self):
