@@ -14,7 +14,7 @@ namespace flank {
 
 namespace {
 
-constexpr int kLeafItems = 8;
+constexpr int kLeafItems = ObbTree::kMaxLeafItems;
 // Subtrees larger than this build their two halves concurrently (into their own node lists,
 // joined after): a few levels at the top, so the copies of the join stay small.
 constexpr int kParallelItems = 16384;

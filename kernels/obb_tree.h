@@ -16,6 +16,7 @@
 #include <span>
 #include <vector>
 
+#include "kernels/lanes.h"
 #include "kernels/types.h"
 
 namespace flank {
@@ -66,6 +67,9 @@ struct ObbLeaf {
 
 class ObbTree {
  public:
+  // A leaf holds at most this many items (median splits stop below it).
+  static constexpr int kMaxLeafItems = 8;
+
   ObbTree() = default;
   // Builds over triangles given as 3 corners each; `pad` (≥ 0) widens every box so that
   // rounding never cuts off a triangle (a few 1e-13 of the coordinates' magnitude is
@@ -82,11 +86,11 @@ class ObbTree {
   const std::vector<ObbLeaf>& leaves() const { return leaves_; }
   const Vec3& origin() const { return origin_; }
 
-  // Depth-first, nearest box first. `visit(position)` is called for every leaf item whose
-  // box may hold a point not farther than √best_d2 (position indexes order()); it may lower
-  // best_d2. Boxes are pruned only when certainly farther, so every item at the minimum
-  // distance is visited: ties can be broken by the caller independently of the visiting
-  // order.
+  // Depth-first, nearest box first. `visit(leaf)` is called for every leaf whose box may hold
+  // a point not farther than √best_d2 (leaf indexes leaves(); its items are the positions
+  // order()[first, first + count)); it may lower best_d2. Boxes are pruned only when
+  // certainly farther, so every leaf holding an item at the minimum distance is visited: ties
+  // can be broken by the caller independently of the visiting order.
   template <class Visit>
   void nearest(const Vec3& p, double& best_d2, Visit&& visit) const;
 
@@ -115,8 +119,7 @@ inline float ObbTree::threshold(double best_d2, double query_scale) const {
 template <class Visit>
 void ObbTree::nearest(const Vec3& p, double& best_d2, Visit&& visit) const {
   if (wide_.empty()) {
-    if (leaves_.size() == 1)  // a tree of one leaf
-      for (std::int32_t i = leaves_[0].first; i < leaves_[0].first + leaves_[0].count; ++i) visit(i);
+    if (leaves_.size() == 1) visit(std::int32_t{0});  // a tree of one leaf
     return;
   }
   const Vec3 rel = p - origin_;
@@ -136,23 +139,25 @@ void ObbTree::nearest(const Vec3& p, double& best_d2, Visit&& visit) const {
     const Entry e = stack[--top];
     if (e.lb2 > thr) continue;
     if (e.child < 0) {
-      const ObbLeaf& leaf = leaves_[static_cast<std::size_t>(-1 - e.child)];
-      for (std::int32_t i = leaf.first; i < leaf.first + leaf.count; ++i) visit(i);
+      visit(static_cast<std::int32_t>(-1 - e.child));
       thr = threshold(best_d2, query_scale);
       continue;
     }
     const ObbWideNode& n = wide_[static_cast<std::size_t>(e.child)];
-    float lb[ObbWideNode::kLanes];
-    for (int l = 0; l < ObbWideNode::kLanes; ++l) {
-      const float dx = px - n.centre[0][l], dy = py - n.centre[1][l], dz = pz - n.centre[2][l];
-      float sum = 0.0f;
-      for (int k = 0; k < 3; ++k) {
-        const float x = n.axes[3 * k][l] * dx + n.axes[3 * k + 1][l] * dy + n.axes[3 * k + 2][l] * dz;
-        const float excess = std::max(std::abs(x) - n.half[k][l], 0.0f);
-        sum += excess * excess;
-      }
-      lb[l] = sum;
+    // The four boxes at once, one lane each.
+    static_assert(sizeof(Float4) == ObbWideNode::kLanes * sizeof(float));
+    const Float4 dx = splat<Float4>(px) - load_lanes<Float4>(n.centre[0]);
+    const Float4 dy = splat<Float4>(py) - load_lanes<Float4>(n.centre[1]);
+    const Float4 dz = splat<Float4>(pz) - load_lanes<Float4>(n.centre[2]);
+    Float4 sum = splat<Float4>(0.0f);
+    for (int k = 0; k < 3; ++k) {
+      const Float4 x = load_lanes<Float4>(n.axes[3 * k]) * dx + load_lanes<Float4>(n.axes[3 * k + 1]) * dy +
+                       load_lanes<Float4>(n.axes[3 * k + 2]) * dz;
+      const Float4 excess = lane_max(lane_abs(x) - load_lanes<Float4>(n.half[k]), splat<Float4>(0.0f));
+      sum += excess * excess;
     }
+    float lb[ObbWideNode::kLanes];
+    store_lanes(sum, lb);
     // The lanes within reach, nearest last on the stack (popped first).
     Entry near[ObbWideNode::kLanes];
     int m = 0;

@@ -13,6 +13,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "kernels/lanes.h"
 #include "kernels/obb_tree.h"
 #include "kernels/parallel.h"
 
@@ -93,6 +94,10 @@ inline Vec3 closest_on_triangle(const Vec3& p, const Vec3& a, const Vec3& b, con
   return a + (vb * inv) * ab + (vc * inv) * ac;
 }
 
+struct Corners {
+  Vec3 a, b, c;
+};
+
 struct Triangle {
   Vec3 a, b, c;
   // A disc around the triangle in its own plane (a slab `thickness` thick, for the rounding
@@ -116,6 +121,60 @@ struct Triangle {
     return across * across + along * along;
   }
 };
+
+// The box tree's leaves for the query: a leaf's triangles side by side in single precision
+// (lane l is item first + l), relative to the leaf's own origin, each in its own frame (e1
+// along ab, e2 in the plane, n the normal) with its corners at (0, 0), (bx, 0) and (cx, cy),
+// cy > 0. From these a query gets every triangle's distance in a few vector operations, and
+// only the triangles that may be nearest get the exact test in double precision.
+struct alignas(16) LeafPack {
+  static constexpr int kLanes = ObbTree::kMaxLeafItems;
+  float ax[kLanes], ay[kLanes], az[kLanes];     // corner a − origin
+  float e1x[kLanes], e1y[kLanes], e1z[kLanes];  // unit, along ab
+  float e2x[kLanes], e2y[kLanes], e2z[kLanes];  // unit, in the plane, toward c
+  float nx[kLanes], ny[kLanes], nz[kLanes];     // unit normal
+  float bx[kLanes], cx[kLanes], cy[kLanes];     // b and c in the frame
+  float inv_ab[kLanes], inv_ac[kLanes], inv_bc[kLanes];  // 1/|ab|², 1/|ac|², 1/|bc|²
+  Vec3 origin = Vec3::Zero();                   // the mean of the leaf's corners
+  double radius = 0.0;                          // of the leaf's corners about the origin
+  std::int32_t first = 0, count = 0;            // positions in the leaf order
+  // Lanes whose frame single precision cannot hold (a sliver): always tested exactly.
+  std::uint32_t always = 0;
+};
+
+// Squared distances from q (relative to the pack's origin) to the pack's triangles in single
+// precision: the distance in the plane to the triangle (0 inside it) and the height above the
+// plane. Every lane is computed, unused ones on copies of lane 0, so that no lane meets an
+// infinity or a NaN (Debug tests trap them).
+void lane_distances(const LeafPack& k, float qx, float qy, float qz, float* out) {
+  using V = Float4;
+  constexpr int W = sizeof(V) / sizeof(float);
+  static_assert(LeafPack::kLanes % W == 0);
+  const V zero = splat<V>(0.0f), one = splat<V>(1.0f);
+  for (int o = 0; o < LeafPack::kLanes; o += W) {
+    const auto ld = [o](const float* p) { return load_lanes<V>(p + o); };
+    const V dx = splat<V>(qx) - ld(k.ax), dy = splat<V>(qy) - ld(k.ay), dz = splat<V>(qz) - ld(k.az);
+    const V x = ld(k.e1x) * dx + ld(k.e1y) * dy + ld(k.e1z) * dz;
+    const V y = ld(k.e2x) * dx + ld(k.e2y) * dy + ld(k.e2z) * dz;
+    const V h = ld(k.nx) * dx + ld(k.ny) * dy + ld(k.nz) * dz;
+    const V bx = ld(k.bx), cx = ld(k.cx), cy = ld(k.cy);
+    // The three edges as segments: the nearest point of each, clamped to its ends.
+    const V t1 = lane_min(lane_max(x * bx * ld(k.inv_ab), zero), one);
+    const V u1 = x - t1 * bx;
+    const V d1 = u1 * u1 + y * y;
+    const V t2 = lane_min(lane_max((x * cx + y * cy) * ld(k.inv_ac), zero), one);
+    const V u2 = x - t2 * cx, v2 = y - t2 * cy;
+    const V d2 = u2 * u2 + v2 * v2;
+    const V ex = cx - bx, xb = x - bx;
+    const V t3 = lane_min(lane_max((xb * ex + y * cy) * ld(k.inv_bc), zero), one);
+    const V u3 = xb - t3 * ex, v3 = y - t3 * cy;
+    const V d3 = u3 * u3 + v3 * v3;
+    // Inside the triangle (all three edge functions ≥ 0): no distance in the plane.
+    const auto inside = (y >= zero) & (ex * y - cy * xb >= zero) & (cy * x - cx * y >= zero);
+    const V rho2 = inside ? zero : lane_min(lane_min(d1, d2), d3);
+    store_lanes(h * h + rho2, out + o);
+  }
+}
 
 // Embree reports errors through this sink; it never throws (it runs inside Embree). The
 // first error wins; the constructor turns it into an exception, queries ignore it.
@@ -202,11 +261,12 @@ Vec3 closest_point_on_triangle(const Vec3& p, const Vec3& a, const Vec3& b, cons
 struct SurfaceIndex::Impl {
   Mesh mesh;
   Points normals;
-  std::vector<Triangle> triangles;          // per face, double precision, for the exact callback
   QueryEngine engine = QueryEngine::kBoxTree;
+  std::vector<Triangle> triangles;          // kEmbree: per face, for the exact callback
   ObbTree tree;                             // kBoxTree
-  std::vector<Triangle> leaf_triangles;     // kBoxTree: triangles in tree.order(), contiguous
-  std::vector<int> leaf_faces;              // kBoxTree: their faces
+  std::vector<Corners> leaf_corners;        // kBoxTree: per position of the leaf order, contiguous
+  std::vector<std::int32_t> face_position;  // kBoxTree: face → position (tree.order() inverts it)
+  std::vector<LeafPack> packs;              // kBoxTree: per leaf of tree.leaves()
   std::vector<std::uint8_t> edge_boundary;  // per face, bit k: edge (k, k+1 mod 3) is a boundary
   std::vector<std::uint8_t> vertex_boundary;
   Vec3 origin = Vec3::Zero();  // bbox centre; Embree gets coordinates relative to it
@@ -235,7 +295,7 @@ struct SurfaceIndex::Impl {
 
   void build_adjacency();
   void build_scene();
-  void build_tree(double pad);
+  void build_tree(const std::vector<Corners>& corners, double pad);
 
   ClosestPoint query(const Vec3& p, int hint_face) const;
   ClosestPoint query_once(const Vec3& p, int hint_face) const;
@@ -315,7 +375,7 @@ void SurfaceIndex::Impl::build_scene() {
 namespace {
 
 struct QueryState {
-  const Triangle* triangles;
+  const Triangle* triangles;  // kEmbree: per face
   Vec3 p;
   Vec3 best_point = Vec3::Zero();
   double best_d2 = kInf;
@@ -323,16 +383,12 @@ struct QueryState {
   int best_region = 0;
   double slack = 0.0;
 
-  // Exact distance to face f; keeps the lexicographic minimum of (distance², face), so the
-  // answer does not depend on the visiting order (hint or not, BVH order).
-  bool consider(int f) { return consider(f, triangles[f]); }
-  bool consider(int f, const Triangle& t) {
+  // Exact distance to face f with corners a, b, c; keeps the lexicographic minimum of
+  // (distance², face), so the answer does not depend on the visiting order (hint or not,
+  // tree order).
+  bool exact(int f, const Vec3& a, const Vec3& b, const Vec3& c) {
     int region = 0;
-    // d² ≥ lb² > best_d2: the triangle can neither win nor tie. The bound's own rounding is
-    // under 1e-15 of (lb² + |p − centre|²); the margin is a thousandfold.
-    const double lb2 = t.lower_bound2(p);
-    if (lb2 > best_d2 && lb2 - best_d2 > 1e-12 * (lb2 + (p - t.centre).squaredNorm())) return false;
-    const Vec3 q = closest_on_triangle(p, t.a, t.b, t.c, region);
+    const Vec3 q = closest_on_triangle(p, a, b, c, region);
     const double d2 = (p - q).squaredNorm();
     if (d2 < best_d2 || (d2 == best_d2 && f < best_face)) {
       best_d2 = d2;
@@ -343,7 +399,54 @@ struct QueryState {
     }
     return false;
   }
+  // The same behind the triangle's disc bound (Embree's path).
+  bool consider(int f) {
+    const Triangle& t = triangles[f];
+    // d² ≥ lb² > best_d2: the triangle can neither win nor tie. The bound's own rounding is
+    // under 1e-15 of (lb² + |p − centre|²); the margin is a thousandfold.
+    const double lb2 = t.lower_bound2(p);
+    if (lb2 > best_d2 && lb2 - best_d2 > 1e-12 * (lb2 + (p - t.centre).squaredNorm())) return false;
+    return exact(f, t.a, t.b, t.c);
+  }
 };
+
+// Beyond this magnitude (query distance plus leaf size) single precision is not used: squares
+// would overflow.
+constexpr double kFloatReach = 1e18;
+
+// A leaf of the box tree: single-precision distances to all its triangles, then the exact test
+// for those that may be nearest, nearest first, against the best so far. The float distance of
+// a lane errs by less than 1e-6 of (|q| + radius) (a few roundings of quantities of that size:
+// the relative coordinates, the unit frame, the corners in it); triangles are passed over only
+// when farther than the best by 1e-5 of it, a tenfold margin. Ties and the minimum itself
+// always reach the exact test.
+void visit_leaf(const LeafPack& k, const Corners* corners, const std::vector<int>& faces, QueryState& st) {
+  const Vec3 q = st.p - k.origin;
+  const double reach = q.norm() + k.radius;
+  std::uint32_t todo = (std::uint32_t{1} << k.count) - 1;
+  float d[LeafPack::kLanes];
+  if (reach < kFloatReach) {
+    lane_distances(k, static_cast<float>(q.x()), static_cast<float>(q.y()), static_cast<float>(q.z()), d);
+  } else {
+    std::fill(d, d + LeafPack::kLanes, 0.0f);
+  }
+  for (int l = 0; l < k.count; ++l)
+    if ((k.always >> l) & 1u) d[l] = 0.0f;
+  const double margin = 1e-5 * reach;
+  while (todo) {
+    int lane = -1;
+    for (int l = 0; l < k.count; ++l)
+      if (((todo >> l) & 1u) && (lane < 0 || d[l] < d[lane])) lane = l;
+    if (st.best_d2 < kInf) {
+      const double r = std::sqrt(st.best_d2) + margin;
+      if (static_cast<double>(d[lane]) > r * r * (1.0 + 1e-6)) break;
+    }
+    const std::size_t pos = static_cast<std::size_t>(k.first + lane);
+    const Corners& c = corners[pos];
+    st.exact(faces[pos], c.a, c.b, c.c);
+    todo &= ~(std::uint32_t{1} << lane);
+  }
+}
 
 // Embree calls this for every triangle in a visited leaf; shrinking the radius prunes the
 // rest of the traversal.
@@ -373,31 +476,37 @@ ClosestPoint SurfaceIndex::Impl::query(const Vec3& p, int hint_face) const {
 
 ClosestPoint SurfaceIndex::Impl::query_once(const Vec3& p, int hint_face) const {
   ClosestPoint out;
-  if (triangles.empty()) return out;
+  const int nf = mesh.face_count();
+  if (nf == 0) return out;
 
   QueryState state{triangles.data(), p};
   state.slack = slack;
-  alignas(16) RTCPointQuery q;
-  q.x = static_cast<float>(p.x() - origin.x());
-  q.y = static_cast<float>(p.y() - origin.y());
-  q.z = static_cast<float>(p.z() - origin.z());
-  q.time = 0.0f;
-  q.radius = std::numeric_limits<float>::infinity();
-  // Embree 3 culls BVH nodes against the radius the query starts with and applies the
-  // shrunk radius only when popping its stack, so a tight start is what makes warm queries
-  // cheap.
-  if (hint_face >= 0 && hint_face < static_cast<int>(triangles.size())) {
-    state.consider(hint_face);
-    q.radius = search_radius(std::sqrt(state.best_d2), slack);
-  }
+  const bool hinted = hint_face >= 0 && hint_face < nf;
   if (engine == QueryEngine::kEmbree) {
+    alignas(16) RTCPointQuery q;
+    q.x = static_cast<float>(p.x() - origin.x());
+    q.y = static_cast<float>(p.y() - origin.y());
+    q.z = static_cast<float>(p.z() - origin.z());
+    q.time = 0.0f;
+    q.radius = std::numeric_limits<float>::infinity();
+    // Embree 3 culls BVH nodes against the radius the query starts with and applies the
+    // shrunk radius only when popping its stack, so a tight start is what makes warm queries
+    // cheap.
+    if (hinted) {
+      state.consider(hint_face);
+      q.radius = search_radius(std::sqrt(state.best_d2), slack);
+    }
     RTCPointQueryContext context;
     rtcInitPointQueryContext(&context);
     rtcPointQuery(scene, &q, &context, &point_query_callback, &state);
   } else {
-    tree.nearest(p, state.best_d2, [&](std::int32_t i) {
-      state.consider(leaf_faces[static_cast<std::size_t>(i)],
-                     leaf_triangles[static_cast<std::size_t>(i)]);
+    // The hint's exact distance bounds the search from the start.
+    if (hinted) {
+      const Corners& c = leaf_corners[static_cast<std::size_t>(face_position[static_cast<std::size_t>(hint_face)])];
+      state.exact(hint_face, c.a, c.b, c.c);
+    }
+    tree.nearest(p, state.best_d2, [&](std::int32_t leaf) {
+      visit_leaf(packs[static_cast<std::size_t>(leaf)], leaf_corners.data(), tree.order(), state);
     });
   }
   if (state.best_face == kNoFace) return out;
@@ -443,40 +552,115 @@ SurfaceIndex::SurfaceIndex(const Mesh& mesh, QueryEngine engine)
   m.on_surface = 1e-14 * scale;
 
   const int nf = mesh.face_count();
-  m.triangles.resize(static_cast<std::size_t>(nf));
-  for (int f = 0; f < nf; ++f) {
-    Triangle& t = m.triangles[static_cast<std::size_t>(f)];
-    t.a = mesh.V.row(mesh.F(f, 0));
-    t.b = mesh.V.row(mesh.F(f, 1));
-    t.c = mesh.V.row(mesh.F(f, 2));
-    t.centre = (t.a + t.b + t.c) / 3.0;
-    const Vec3 n = (t.b - t.a).cross(t.c - t.a);
-    const double area2 = n.norm();
-    t.normal = area2 > 0.0 && std::isfinite(area2) ? Vec3(n / area2) : Vec3::Zero();
-    // Rounded up a little: the disc must hold the triangle whatever the rounding.
-    t.radius = std::max({(t.a - t.centre).norm(), (t.b - t.centre).norm(), (t.c - t.centre).norm()}) *
-               (1.0 + 1e-12) + 1e-300;
-    t.thickness = t.normal == Vec3::Zero()
-                      ? 0.0
-                      : 2.0 * std::max({std::abs(t.normal.dot(t.a - t.centre)), std::abs(t.normal.dot(t.b - t.centre)),
-                                        std::abs(t.normal.dot(t.c - t.centre))}) + m.on_surface;
-  }
+  std::vector<Corners> corners(static_cast<std::size_t>(nf));
+  for (int f = 0; f < nf; ++f)
+    corners[static_cast<std::size_t>(f)] = {mesh.V.row(mesh.F(f, 0)), mesh.V.row(mesh.F(f, 1)), mesh.V.row(mesh.F(f, 2))};
   m.build_adjacency();
-  if (m.engine == QueryEngine::kEmbree)
+  if (m.engine == QueryEngine::kEmbree) {
+    m.triangles.resize(corners.size());
+    for (int f = 0; f < nf; ++f) {
+      const Corners& c = corners[static_cast<std::size_t>(f)];
+      Triangle& t = m.triangles[static_cast<std::size_t>(f)];
+      t.a = c.a, t.b = c.b, t.c = c.c;
+      t.centre = (t.a + t.b + t.c) / 3.0;
+      const Vec3 n = m.normals.row(f);
+      t.normal = n.allFinite() ? n : Vec3::Zero();
+      // Rounded up a little: the disc must hold the triangle whatever the rounding.
+      t.radius = std::max({(t.a - t.centre).norm(), (t.b - t.centre).norm(), (t.c - t.centre).norm()}) *
+                 (1.0 + 1e-12) + 1e-300;
+      t.thickness = t.normal == Vec3::Zero()
+                        ? 0.0
+                        : 2.0 * std::max({std::abs(t.normal.dot(t.a - t.centre)), std::abs(t.normal.dot(t.b - t.centre)),
+                                          std::abs(t.normal.dot(t.c - t.centre))}) + m.on_surface;
+    }
     m.build_scene();
-  else
-    m.build_tree(1e-12 * scale);
+  } else {
+    m.build_tree(corners, 1e-12 * scale);
+  }
 }
 
-void SurfaceIndex::Impl::build_tree(double pad) {
-  std::vector<std::array<Vec3, 3>> corners(triangles.size());
-  for (std::size_t f = 0; f < triangles.size(); ++f)
-    corners[f] = {triangles[f].a, triangles[f].b, triangles[f].c};
-  tree = ObbTree(corners, pad);
-  leaf_faces = tree.order();
-  leaf_triangles.resize(leaf_faces.size());
-  for (std::size_t i = 0; i < leaf_faces.size(); ++i)
-    leaf_triangles[i] = triangles[static_cast<std::size_t>(leaf_faces[i])];
+namespace {
+
+// Lane l of pack k holds triangle c, in single precision relative to k.origin; a sliver whose
+// frame single precision cannot hold goes to k.always.
+void pack_lane(LeafPack& k, int l, const Corners& c) {
+  const Vec3 a = c.a - k.origin;
+  const Vec3 ab = c.b - c.a, ac = c.c - c.a;
+  const double lab = ab.norm();
+  Vec3 e1 = Vec3::Zero(), e2 = Vec3::Zero(), n = Vec3::Zero();
+  double bx = 0, cx = 0, cy = 0;
+  bool ok = lab > 0.0 && k.radius < kFloatReach;
+  if (ok) {
+    e1 = ab / lab;
+    const Vec3 cr = e1.cross(ac);
+    const double lcr = cr.norm();
+    ok = lcr > 1e-6 * std::max(lab, ac.norm());  // not a sliver for float frames
+    if (ok) {
+      n = cr / lcr;
+      e2 = n.cross(e1);
+      bx = lab, cx = ac.dot(e1), cy = ac.dot(e2);
+    }
+  }
+  if (!ok) {
+    k.always |= std::uint32_t{1} << l;
+    e1 = e2 = n = Vec3::Zero();
+    bx = cx = cy = 0.0;
+  }
+  const auto f = [](double x) { return static_cast<float>(x); };
+  const Vec3 af = ok ? a : Vec3::Zero();
+  k.ax[l] = f(af.x()), k.ay[l] = f(af.y()), k.az[l] = f(af.z());
+  k.e1x[l] = f(e1.x()), k.e1y[l] = f(e1.y()), k.e1z[l] = f(e1.z());
+  k.e2x[l] = f(e2.x()), k.e2y[l] = f(e2.y()), k.e2z[l] = f(e2.z());
+  k.nx[l] = f(n.x()), k.ny[l] = f(n.y()), k.nz[l] = f(n.z());
+  k.bx[l] = f(bx), k.cx[l] = f(cx), k.cy[l] = f(cy);
+  // 1/|e|² of the float corners, so that t = 1 lands on the stored end.
+  const auto inv = [](double x2) { return x2 > 0.0 ? static_cast<float>(1.0 / x2) : 0.0f; };
+  const double fbx = k.bx[l], fcx = k.cx[l], fcy = k.cy[l];
+  k.inv_ab[l] = ok ? inv(fbx * fbx) : 0.0f;
+  k.inv_ac[l] = ok ? inv(fcx * fcx + fcy * fcy) : 0.0f;
+  k.inv_bc[l] = ok ? inv((fcx - fbx) * (fcx - fbx) + fcy * fcy) : 0.0f;
+}
+
+}  // namespace
+
+void SurfaceIndex::Impl::build_tree(const std::vector<Corners>& corners, double pad) {
+  {
+    std::vector<std::array<Vec3, 3>> c(corners.size());
+    for (std::size_t f = 0; f < corners.size(); ++f) c[f] = {corners[f].a, corners[f].b, corners[f].c};
+    tree = ObbTree(c, pad);
+  }
+  const std::vector<int>& order = tree.order();
+  leaf_corners.resize(order.size());
+  face_position.resize(order.size());
+  for (std::size_t i = 0; i < order.size(); ++i) {
+    leaf_corners[i] = corners[static_cast<std::size_t>(order[i])];
+    face_position[static_cast<std::size_t>(order[i])] = static_cast<std::int32_t>(i);
+  }
+  const std::vector<ObbLeaf>& leaves = tree.leaves();
+  packs.resize(leaves.size());
+  parallel_for(0, leaves.size(), [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i) {
+      LeafPack& k = packs[i];
+      k = LeafPack{};
+      k.first = leaves[i].first;
+      k.count = leaves[i].count;
+      assert(k.count >= 1 && k.count <= LeafPack::kLanes);
+      Vec3 sum = Vec3::Zero();
+      for (int l = 0; l < k.count; ++l) {
+        const Corners& c = leaf_corners[static_cast<std::size_t>(k.first + l)];
+        sum += c.a + c.b + c.c;
+      }
+      k.origin = sum / (3.0 * k.count);
+      for (int l = 0; l < k.count; ++l) {
+        const Corners& c = leaf_corners[static_cast<std::size_t>(k.first + l)];
+        for (const Vec3* v : {&c.a, &c.b, &c.c}) k.radius = std::max(k.radius, (*v - k.origin).norm());
+      }
+      // Unused lanes repeat lane 0: their arithmetic stays finite, their results unread.
+      for (int l = 0; l < LeafPack::kLanes; ++l)
+        pack_lane(k, l, leaf_corners[static_cast<std::size_t>(k.first + (l < k.count ? l : 0))]);
+      k.always &= (std::uint32_t{1} << k.count) - 1;
+    }
+  }, 256);
 }
 
 SurfaceIndex::~SurfaceIndex() = default;

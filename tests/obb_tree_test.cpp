@@ -187,8 +187,10 @@ TEST(ObbTree, EmptyAndSingleTriangle) {
   EXPECT_EQ(visits, 0);
   const std::array<Vec3, 3> one[1] = {{Vec3(0, 0, 0), Vec3(1, 0, 0), Vec3(0, 1, 0)}};
   const ObbTree single(one, 0.0);
-  single.nearest(Vec3(5, 5, 5), best, [&](int pos) {
-    EXPECT_EQ(pos, 0);
+  single.nearest(Vec3(5, 5, 5), best, [&](int leaf) {
+    EXPECT_EQ(leaf, 0);
+    EXPECT_EQ(single.leaves()[0].first, 0);
+    EXPECT_EQ(single.leaves()[0].count, 1);
     ++visits;
   });
   EXPECT_EQ(visits, 1);

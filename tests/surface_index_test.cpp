@@ -325,6 +325,51 @@ TEST(SurfaceIndex, MatchesBruteForceFarFromOrigin) {
   check_against_brute_force(m, make_queries(m, 250 * kQueryScale, 29), 31);
 }
 
+// The box tree passes over a triangle when its single-precision distance is farther than the
+// best by a margin: exact ties and near-ties must still reach the exact test. Above a flat grid,
+// points over a vertex are equidistant from up to six triangles and points over an edge from
+// two, at every height; brute force keeps the lowest face.
+TEST(SurfaceIndex, MatchesBruteForceOnExactTies) {
+  const Mesh m = make_grid(24, 24, 12.0, 12.0, [](double, double) { return 0.0; });
+  Points Q(0, 3);
+  std::vector<Vec3> points;
+  for (double height : {0.0, 1e-9, 0.37, 5.0, 60.0})
+    for (int j = 1; j < 24; j += 5)
+      for (int i = 1; i < 24; i += 4) {
+        const Vec3 vertex(0.5 * i, 0.5 * j, height);
+        points.push_back(vertex);
+        points.push_back(vertex + Vec3(0.25, 0.0, 0.0));   // over a grid edge
+        points.push_back(vertex + Vec3(0.25, 0.25, 0.0));  // over a diagonal
+        points.push_back(vertex + Vec3(0.25, 0.25 + 1e-12, 0.0));  // just off it
+      }
+  Q.resize(static_cast<Eigen::Index>(points.size()), 3);
+  for (std::size_t k = 0; k < points.size(); ++k) Q.row(static_cast<Eigen::Index>(k)) = points[k].transpose();
+  check_against_brute_force(m, Q, 41);
+}
+
+// Slivers (angles down to 1e-7 rad) far from the origin: their frames in single precision are
+// the coarsest; brute force decides.
+TEST(SurfaceIndex, MatchesBruteForceOnSliversFarFromOrigin) {
+  std::mt19937 rng(43);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  Mesh m;
+  const int count = 600;
+  m.V.resize(3 * count, 3);
+  m.F.resize(count, 3);
+  const Vec3 far(3e4, -1e4, 2e4);
+  for (int f = 0; f < count; ++f) {
+    const Vec3 a = far + 5.0 * Vec3(u(rng), u(rng), u(rng));
+    const Vec3 dir = Vec3(u(rng), u(rng), u(rng)).normalized();
+    const Vec3 side = dir.unitOrthogonal();
+    const double length = 0.5 + std::abs(u(rng));
+    const double thin = std::pow(10.0, -7.0 + 6.0 * std::abs(u(rng)));  // 1e-7 .. 1e-1
+    const Vec3 b = a + length * dir, c = a + 0.5 * length * dir + thin * length * side;
+    m.V.row(3 * f) = a.transpose(), m.V.row(3 * f + 1) = b.transpose(), m.V.row(3 * f + 2) = c.transpose();
+    m.F.row(f) << 3 * f, 3 * f + 1, 3 * f + 2;
+  }
+  check_against_brute_force(m, make_queries(m, 250 * kQueryScale, 47), 53);
+}
+
 TEST(SurfaceIndex, BatchedParallelEqualsSerial) {
   const Mesh m = perturbed_grid(37);
   const SurfaceIndex index(m);
