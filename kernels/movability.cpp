@@ -76,21 +76,32 @@ Movability movability_from_directions(const Vec3& a, const Vec3& b, std::span<co
   return out;
 }
 
-Movability movability(const SurfaceIndex& index, const Vec3& a, const Vec3& b,
-                      const MovabilityOptions& options, std::span<int> hints) {
-  const int n = options.samples;
+std::vector<ClosestPoint> line_footpoints(const SurfaceIndex& index, const Vec3& a, const Vec3& b, int n,
+                                          std::span<int> hints) {
   Points q(n, 3);
-  std::vector<double> s(static_cast<std::size_t>(n));
   for (int i = 0; i < n; ++i) {
-    s[i] = movability_sample(i, n);
-    q.row(i) = ((1.0 - s[i]) * a + s[i] * b).transpose();
+    const double s = movability_sample(i, n);
+    q.row(i) = ((1.0 - s) * a + s * b).transpose();
   }
   std::vector<ClosestPoint> cp(static_cast<std::size_t>(n));
-  std::vector<int> local_hints;
-  std::span<const int> hint_view;
-  if (static_cast<int>(hints.size()) == n) hint_view = hints;
-  index.closest_points_serial(q, hint_view, cp);
+  const bool hinted = static_cast<int>(hints.size()) == n;
+  index.closest_points_serial(q, hinted ? std::span<const int>(hints) : std::span<const int>{}, cp);
+  if (hinted)
+    for (int i = 0; i < n; ++i) hints[i] = cp[i].face;
+  return cp;
+}
 
+Movability movability(const SurfaceIndex& index, const Vec3& a, const Vec3& b,
+                      const MovabilityOptions& options, std::span<int> hints) {
+  const std::vector<ClosestPoint> cp = line_footpoints(index, a, b, options.samples, hints);
+  return movability_from_footpoints(a, b, cp, options);
+}
+
+Movability movability_from_footpoints(const Vec3& a, const Vec3& b, std::span<const ClosestPoint> cp,
+                                      const MovabilityOptions& options) {
+  const int n = static_cast<int>(cp.size());
+  std::vector<double> s(static_cast<std::size_t>(n));
+  for (int i = 0; i < n; ++i) s[i] = movability_sample(i, n);
   Points g(n, 3);
   std::vector<double> w(static_cast<std::size_t>(n), 1.0);
   int boundary = 0;
@@ -107,7 +118,6 @@ Movability movability(const SurfaceIndex& index, const Vec3& a, const Vec3& b,
     const bool interior_pair = i > 0 && !cp[i].boundary && !cp[i - 1].boundary && cp[i].face >= 0 && cp[i - 1].face >= 0;
     if (interior_pair && (cp[i].point - cp[i - 1].point).norm() > options.jump_factor * step + 1e-12)
       jump = true;
-    if (static_cast<int>(hints.size()) == n) hints[i] = cp[i].face;
   }
   Vec3 tangent = Vec3::Zero();
   if (options.tangent_sweep_below > 0) {

@@ -6,6 +6,7 @@
 #include <limits>
 #include <optional>
 #include <span>
+#include <vector>
 
 #include "kernels/cutter.h"
 
@@ -80,5 +81,14 @@ Movability movability_from_directions(const Vec3& a, const Vec3& b, std::span<co
 // closest-point queries and receives the new footpoint faces. Runs on the calling thread.
 Movability movability(const SurfaceIndex& index, const Vec3& a, const Vec3& b,
                       const MovabilityOptions& options = {}, std::span<int> hints = {});
+
+// The same in two steps, for callers that judge one line several ways (several cutter kinds,
+// say): the footpoints of its n samples at movability_sample(i, n), then the movability from
+// them (options.samples is not read: n is footpoints.size()). movability() is exactly
+// movability_from_footpoints(a, b, line_footpoints(index, a, b, options.samples, hints), options).
+std::vector<ClosestPoint> line_footpoints(const SurfaceIndex& index, const Vec3& a, const Vec3& b, int n,
+                                          std::span<int> hints = {});
+Movability movability_from_footpoints(const Vec3& a, const Vec3& b, std::span<const ClosestPoint> footpoints,
+                                      const MovabilityOptions& options);
 
 }  // namespace flank

@@ -224,26 +224,26 @@ std::vector<LineCandidate> seed_candidates(const SurfaceIndex& index, const Seed
     std::vector<Vec3> dirs{a.u};
     for (const Vec3& w : {w1, w2})
       for (double sgn : {-1.0, 1.0}) dirs.push_back((std::cos(turn) * a.u + sgn * std::sin(turn) * w).normalized());
-    for (CutterKind steering : steer) {
-      MovabilityOptions mo = fine;
-      mo.profile = steering;
-      Line best_line = laid;
-      double best = std::numeric_limits<double>::infinity();
-      for (const Vec3& d : dirs)
-        for (double r : radii) {
-          // The laid line's middle moved to offset r along the seed's normal.
-          const Vec3 m = centre + (seed.point + r * seed.normal - mid0);
-          const Line l{m - 0.5 * a.L0 * d, m + 0.5 * a.L0 * d};
-          const Movability mv = movability(index, l.a, l.b, mo);
-          ++*scored;
+    // Each line's footpoints once, judged with every steering profile.
+    a.start.assign(steer.size(), laid);
+    a.score.assign(steer.size(), std::numeric_limits<double>::infinity());
+    for (const Vec3& d : dirs)
+      for (double r : radii) {
+        // The laid line's middle moved to offset r along the seed's normal.
+        const Vec3 m = centre + (seed.point + r * seed.normal - mid0);
+        const Line l{m - 0.5 * a.L0 * d, m + 0.5 * a.L0 * d};
+        const std::vector<ClosestPoint> feet = line_footpoints(index, l.a, l.b, fine.samples);
+        ++*scored;
+        for (std::size_t si = 0; si < steer.size(); ++si) {
+          MovabilityOptions mo = fine;
+          mo.profile = steer[si];
+          const Movability mv = movability_from_footpoints(l.a, l.b, feet, mo);
           if (!acceptable(mv, o, a.L0)) continue;
           const double sc = line_score(mv, a.L0);
-          if (sc < best) best = sc, best_line = l;
+          if (sc < a.score[si]) a.score[si] = sc, a.start[si] = l;
         }
-      a.start.push_back(best_line);
-      a.score.push_back(best);
-      a.best = std::min(a.best, best);
-    }
+      }
+    for (double sc : a.score) a.best = std::min(a.best, sc);
     aimed.push_back(std::move(a));
   }
   std::stable_sort(aimed.begin(), aimed.end(), [](const Aimed& x, const Aimed& y) { return x.best < y.best; });
@@ -310,11 +310,12 @@ std::vector<LineCandidate> seed_candidates(const SurfaceIndex& index, const Seed
         // The simplest allowed kind that follows the line's distances; the most general one
         // must at least fit them within line_misfit.
         bool found = false;
+        const std::vector<ClosestPoint> feet = line_footpoints(index, lc.line.a, lc.line.b, fine.samples);
+        ++*scored;
         for (CutterKind kind : o.kinds) {
           MovabilityOptions mk = fine;
           mk.profile = kind;
-          const Movability m = movability(index, lc.line.a, lc.line.b, mk);
-          ++*scored;
+          const Movability m = movability_from_footpoints(lc.line.a, lc.line.b, feet, mk);
           const double limit = kind == general ? thresholds.line_misfit : thresholds.kind_misfit;
           if (acceptable(m, o, L) && m.profile_rms <= limit) {
             lc.kind = kind;

@@ -80,7 +80,8 @@ struct LineCandidate {
 using CoveredFaces = std::vector<char>;
 
 // The candidate lines at one seed, best estimate first. Deterministic; runs on the calling
-// thread. `scored` counts the movability evaluations.
+// thread. `scored` counts the lines whose footpoints were queried (a line judged with several
+// cutter kinds counts once).
 std::vector<LineCandidate> seed_candidates(const SurfaceIndex& index, const Seed& seed, int seed_id,
                                            const CoveredFaces& covered,
                                            const CandidateLineOptions& options,

@@ -99,7 +99,7 @@ struct DecomposeResult {
   StageTimes times;
   int rounds = 0;
   int seeds = 0;
-  long long lines_scored = 0;
+  long long lines_scored = 0;          // candidate lines whose footpoints were queried
   int candidates = 0;                  // candidate lines laid out and swept
   int grown = 0;                       // candidates fitted
   int candidates_valid = 0;            // candidate patches (pieces) valid as tools
