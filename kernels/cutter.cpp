@@ -64,6 +64,38 @@ void profile_basis(CutterKind kind, double s, double* value, double* derivative)
   }
 }
 
+ProfileTable profile_table(CutterKind kind, const std::vector<double>& s) {
+  ProfileTable t;
+  t.kind = kind;
+  t.s = s;
+  const int n = coefficient_count(kind);
+  t.value.resize(static_cast<Eigen::Index>(s.size()), n);
+  t.derivative.resize(static_cast<Eigen::Index>(s.size()), n);
+  double v[kSplineProfileCoefficients], d[kSplineProfileCoefficients];
+  for (std::size_t i = 0; i < s.size(); ++i) {
+    profile_basis(kind, s[i], v, d);
+    for (int k = 0; k < n; ++k) {
+      t.value(static_cast<Eigen::Index>(i), k) = v[k];
+      t.derivative(static_cast<Eigen::Index>(i), k) = d[k];
+    }
+  }
+  return t;
+}
+
+double Cutter::radius_at(const ProfileTable& table, int row) const {
+  assert(table.kind == kind);
+  double r = 0.0;
+  for (int k = 0; k < coeffs.size(); ++k) r += table.value(row, k) * coeffs(k);
+  return r;
+}
+
+double Cutter::slope_at(const ProfileTable& table, int row) const {
+  assert(table.kind == kind);
+  double r = 0.0;
+  for (int k = 0; k < coeffs.size(); ++k) r += table.derivative(row, k) * coeffs(k);
+  return r;
+}
+
 double Cutter::radius(double s) const {
   double v[kSplineProfileCoefficients], d[kSplineProfileCoefficients];
   profile_basis(kind, s, v, d);
@@ -110,15 +142,16 @@ Cutter Cutter::constant(CutterKind kind, double length, double radius) {
   return fit(kind, length, s, r);
 }
 
-Cutter Cutter::fit(CutterKind kind, double length, const std::vector<double>& s,
-                   const std::vector<double>& radii) {
-  assert(s.size() == radii.size() && !s.empty());
+namespace {
+// Least squares over basis rows given by `row(i, v)` (fills v with the basis at sample i).
+template <class Row>
+Cutter fit_rows(CutterKind kind, double length, std::size_t count, const std::vector<double>& radii, Row&& row) {
   const int n = coefficient_count(kind);
   MatX A = MatX::Zero(n, n);
   VecX rhs = VecX::Zero(n);
-  double v[kSplineProfileCoefficients], d[kSplineProfileCoefficients];
-  for (std::size_t i = 0; i < s.size(); ++i) {
-    profile_basis(kind, s[i], v, d);
+  double v[kSplineProfileCoefficients];
+  for (std::size_t i = 0; i < count; ++i) {
+    row(i, v);
     for (int p = 0; p < n; ++p) {
       rhs(p) += v[p] * radii[i];
       for (int q = 0; q < n; ++q) A(p, q) += v[p] * v[q];
@@ -130,6 +163,25 @@ Cutter Cutter::fit(CutterKind kind, double length, const std::vector<double>& s,
   c.length = length;
   c.coeffs = A.ldlt().solve(rhs);
   return c;
+}
+}  // namespace
+
+Cutter Cutter::fit(CutterKind kind, double length, const std::vector<double>& s,
+                   const std::vector<double>& radii) {
+  assert(s.size() == radii.size() && !s.empty());
+  return fit_rows(kind, length, s.size(), radii, [&](std::size_t i, double* v) {
+    double d[kSplineProfileCoefficients];
+    profile_basis(kind, s[i], v, d);
+  });
+}
+
+Cutter Cutter::fit(const ProfileTable& table, double length, const std::vector<int>& rows,
+                   const std::vector<double>& radii) {
+  assert(rows.size() == radii.size() && !rows.empty());
+  const int n = coefficient_count(table.kind);
+  return fit_rows(table.kind, length, rows.size(), radii, [&](std::size_t i, double* v) {
+    for (int k = 0; k < n; ++k) v[k] = table.value(rows[i], k);
+  });
 }
 
 Cutter cone_from_end_radii(double length, double r_tip, double r_end) {

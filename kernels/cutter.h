@@ -22,6 +22,16 @@ int coefficient_count(CutterKind kind);
 // Basis row P(s) (coefficient_count entries) and its s-derivative.
 void profile_basis(CutterKind kind, double s, double* value, double* derivative);
 
+// The basis of `kind` tabulated at fixed parameters, for callers that fit and evaluate many
+// profiles at the same s (every candidate line's samples): row i holds profile_basis(kind, s[i]).
+// Evaluating through it gives the same numbers, bit for bit, as evaluating at s[i] directly.
+struct ProfileTable {
+  CutterKind kind = CutterKind::cylinder;
+  std::vector<double> s;
+  MatX value, derivative;  // #s by coefficient_count(kind)
+};
+ProfileTable profile_table(CutterKind kind, const std::vector<double>& s);
+
 struct Cutter {
   CutterKind kind = CutterKind::cylinder;
   double length = 0.0;  // L = |b − a|
@@ -39,6 +49,12 @@ struct Cutter {
   // Least-squares coefficients so that d(s) matches `radii` sampled at `s`.
   static Cutter fit(CutterKind kind, double length, const std::vector<double>& s,
                     const std::vector<double>& radii);
+  // The same for s = table.s[rows[k]] (rows ascending or not, as fit() would take them).
+  static Cutter fit(const ProfileTable& table, double length, const std::vector<int>& rows,
+                    const std::vector<double>& radii);
+  // radius(table.s[row]) and slope(table.s[row]), read from the table.
+  double radius_at(const ProfileTable& table, int row) const;
+  double slope_at(const ProfileTable& table, int row) const;
 };
 
 // Sphere radii of a cone whose meridian runs from radius r_tip at z = 0 to r_end at z = L.

@@ -2,11 +2,33 @@
 
 #include <Eigen/Eigenvalues>
 #include <cmath>
+#include <memory>
 #include <vector>
 
 namespace flank {
 
 double movability_sample(int i, int n) { return (i + 0.5) / n; }
+
+namespace {
+
+// The radius range of a line's profile is checked at s = k / kRangeChecks, k = 0..kRangeChecks.
+constexpr int kRangeChecks = 20;
+
+// The profile basis of `kind` at the n samples of a line (rows 0..n−1) and at the range checks
+// (rows n..n + kRangeChecks), made once per thread: every line of a search has the same ones.
+const ProfileTable& sample_table(CutterKind kind, int n) {
+  thread_local std::vector<std::unique_ptr<ProfileTable>> tables;
+  const std::size_t rows = static_cast<std::size_t>(n) + kRangeChecks + 1;
+  for (const auto& t : tables)
+    if (t->kind == kind && t->s.size() == rows) return *t;
+  std::vector<double> s;
+  for (int i = 0; i < n; ++i) s.push_back(movability_sample(i, n));
+  for (int k = 0; k <= kRangeChecks; ++k) s.push_back(k / static_cast<double>(kRangeChecks));
+  tables.push_back(std::make_unique<ProfileTable>(profile_table(kind, s)));
+  return *tables.back();
+}
+
+}  // namespace
 
 Movability movability_from_directions(const Vec3& a, const Vec3& b, std::span<const double> s,
                                       PointsRef g, std::span<const double> weights,
@@ -130,32 +152,36 @@ Movability movability_from_footpoints(const Vec3& a, const Vec3& b, std::span<co
                                               options.tangent_sweep_below);
   out.boundary_samples = boundary;
   if (options.profile && out.status == MovabilityStatus::ok) {
-    std::vector<double> ss, dd;
+    // The basis at the samples and at the 21 checks of the radius range, tabulated once.
+    const ProfileTable& table = sample_table(*options.profile, n);
+    std::vector<int> rows;
+    std::vector<double> dd;
     for (int i = 0; i < n; ++i)
-      if (w[i] > 0) ss.push_back(s[i]), dd.push_back(cp[i].distance);
-    out.cutter = Cutter::fit(*options.profile, (b - a).norm(), ss, dd);
+      if (w[i] > 0) rows.push_back(i), dd.push_back(cp[i].distance);
+    out.cutter = Cutter::fit(table, (b - a).norm(), rows, dd);
     double sq = 0.0;
     out.radius_min = std::numeric_limits<double>::infinity();
     out.radius_max = -out.radius_min;
-    for (std::size_t k = 0; k < ss.size(); ++k) {
-      const double r = out.cutter.radius(ss[k]) - dd[k];
+    for (std::size_t k = 0; k < rows.size(); ++k) {
+      const double r = out.cutter.radius_at(table, rows[k]) - dd[k];
       sq += r * r;
     }
-    for (int k = 0; k <= 20; ++k) {
-      const double sk = k / 20.0;
-      out.radius_min = std::min(out.radius_min, out.cutter.radius(sk));
-      out.radius_max = std::max(out.radius_max, out.cutter.radius(sk));
-      out.max_slope = std::max(out.max_slope, std::abs(out.cutter.slope(sk)));
+    for (int k = 0; k <= kRangeChecks; ++k) {
+      const double radius = out.cutter.radius_at(table, n + k);
+      out.radius_min = std::min(out.radius_min, radius);
+      out.radius_max = std::max(out.radius_max, radius);
+      out.max_slope = std::max(out.max_slope, std::abs(out.cutter.slope_at(table, n + k)));
     }
-    out.profile_rms = ss.empty() ? 0.0 : std::sqrt(sq / static_cast<double>(ss.size()));
-    if (options.second_profile && !ss.empty()) {
-      const Cutter second = Cutter::fit(*options.second_profile, (b - a).norm(), ss, dd);
+    out.profile_rms = rows.empty() ? 0.0 : std::sqrt(sq / static_cast<double>(rows.size()));
+    if (options.second_profile && !rows.empty()) {
+      const ProfileTable& second_table = sample_table(*options.second_profile, n);
+      const Cutter second = Cutter::fit(second_table, (b - a).norm(), rows, dd);
       double sq2 = 0.0;
-      for (std::size_t k = 0; k < ss.size(); ++k) {
-        const double r = second.radius(ss[k]) - dd[k];
+      for (std::size_t k = 0; k < rows.size(); ++k) {
+        const double r = second.radius_at(second_table, rows[k]) - dd[k];
         sq2 += r * r;
       }
-      out.second_profile_rms = std::sqrt(sq2 / static_cast<double>(ss.size()));
+      out.second_profile_rms = std::sqrt(sq2 / static_cast<double>(rows.size()));
     }
   }
   if (boundary > options.max_boundary_fraction * n)
