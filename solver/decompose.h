@@ -57,9 +57,9 @@ struct DecomposeOptions {
   int grow_per_round = 16;
   int batch = 8;
   int control_points = 16, samples_t = 48, samples_s = 16, iterations = 10;
-  // Step extensions per accepted Gauss–Newton step (FitOptions::max_extrapolations): each
-  // costs a pass of closest points, and a candidate needs the patch's extent, not the last
-  // digit of its cutter radius.
+  // How far an accepted Gauss–Newton step may be extended (FitOptions::max_extrapolations:
+  // up to 2^this steps): a candidate needs the patch's extent, not the last digit of its cutter
+  // radius.
   int extrapolations = 2;
   // The chosen patches' final evaluation: at least final_rows × final_cols samples, and
   // neighbouring samples at most final_spacing × diagonal apart (candidates are evaluated at

@@ -39,7 +39,10 @@ struct FitOptions {
   // `fair_iterations` it is dropped, because it also damps the slow radius ↔ offset valley
   // that decides the cutter's radius to 0.01 mm.
   int fair_iterations = 4;
-  // After an accepted step, try it again at 1×, 2×, 4× … while the cost falls.
+  // After an accepted step δ, one batch of closest points tries the minimum, along δ, of the
+  // parabola through the cost before, its slope and the cost after, when that lies at least
+  // 1.5 steps out; at most 2^max_extrapolations steps (0: never). The linear convergence along
+  // the radius ↔ offset valley makes successive steps line up and fall short.
   int max_extrapolations = 4;
   double length = 0.0;  // rigid ruling length L; 0: the initial motion's mean length
   double scale = 0.0;   // normalising length; 0: bbox diagonal of Φ
