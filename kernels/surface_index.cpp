@@ -297,8 +297,9 @@ struct SurfaceIndex::Impl {
   void build_scene();
   void build_tree(const std::vector<Corners>& corners, double pad);
 
-  ClosestPoint query(const Vec3& p, int hint_face) const;
-  ClosestPoint query_once(const Vec3& p, int hint_face) const;
+  // Only faces within max_distance count (infinity: all).
+  ClosestPoint query(const Vec3& p, int hint_face, double max_distance = kInf) const;
+  ClosestPoint query_once(const Vec3& p, int hint_face, double max_distance) const;
 };
 
 void SurfaceIndex::Impl::build_adjacency() {
@@ -463,24 +464,28 @@ bool point_query_callback(RTCPointQueryFunctionArguments* args) {
 
 }  // namespace
 
-ClosestPoint SurfaceIndex::Impl::query(const Vec3& p, int hint_face) const {
+ClosestPoint SurfaceIndex::Impl::query(const Vec3& p, int hint_face, double max_distance) const {
 #ifdef FLANK_SLOW_QUERIES
   // A deliberate regression for test builds only (CMake -DFLANK_SLOW_QUERIES=ON): every
   // query is answered twice. It exists to prove that `scripts/scaling-report --check` catches
   // a slowdown; release builds never define it.
-  volatile const int twice = query_once(p, hint_face).face;
+  volatile const int twice = query_once(p, hint_face, max_distance).face;
   (void)twice;
 #endif
-  return query_once(p, hint_face);
+  return query_once(p, hint_face, max_distance);
 }
 
-ClosestPoint SurfaceIndex::Impl::query_once(const Vec3& p, int hint_face) const {
+ClosestPoint SurfaceIndex::Impl::query_once(const Vec3& p, int hint_face, double max_distance) const {
   ClosestPoint out;
   const int nf = mesh.face_count();
   if (nf == 0) return out;
 
   QueryState state{triangles.data(), p};
   state.slack = slack;
+  // A bound a little wide of max_distance² (its rounding), the answer checked against
+  // max_distance itself below: a face at exactly max_distance counts.
+  const double bound2 = max_distance < kInf ? max_distance * max_distance * (1.0 + 1e-12) : kInf;
+  state.best_d2 = bound2;
   const bool hinted = hint_face >= 0 && hint_face < nf;
   if (engine == QueryEngine::kEmbree) {
     alignas(16) RTCPointQuery q;
@@ -488,7 +493,7 @@ ClosestPoint SurfaceIndex::Impl::query_once(const Vec3& p, int hint_face) const 
     q.y = static_cast<float>(p.y() - origin.y());
     q.z = static_cast<float>(p.z() - origin.z());
     q.time = 0.0f;
-    q.radius = std::numeric_limits<float>::infinity();
+    q.radius = bound2 < kInf ? search_radius(std::sqrt(bound2), slack) : std::numeric_limits<float>::infinity();
     // Embree 3 culls BVH nodes against the radius the query starts with and applies the
     // shrunk radius only when popping its stack, so a tight start is what makes warm queries
     // cheap.
@@ -511,6 +516,7 @@ ClosestPoint SurfaceIndex::Impl::query_once(const Vec3& p, int hint_face) const 
   }
   if (state.best_face == kNoFace) return out;
 
+  if (std::sqrt(state.best_d2) > max_distance) return out;
   const int f = state.best_face;
   const Vec3 normal = normals.row(f);
   const Vec3 diff = p - state.best_point;
@@ -694,6 +700,20 @@ std::vector<ClosestPoint> SurfaceIndex::closest_points(PointsRef queries,
           const int hint = i < hints.size() ? hints[i] : -1;
           out[i] = m.query(queries.row(static_cast<Eigen::Index>(i)), hint);
         }
+      },
+      64);
+  return out;
+}
+
+std::vector<ClosestPoint> SurfaceIndex::closest_points_within(PointsRef queries, double max_distance) const {
+  assert(max_distance >= 0.0);
+  const auto count = static_cast<std::size_t>(queries.rows());
+  std::vector<ClosestPoint> out(count);
+  const Impl& m = *impl_;
+  parallel_for(
+      0, count,
+      [&](std::size_t begin, std::size_t end) {
+        for (std::size_t i = begin; i < end; ++i) out[i] = m.query(queries.row(static_cast<Eigen::Index>(i)), -1, max_distance);
       },
       64);
   return out;

@@ -59,6 +59,10 @@ class SurfaceIndex {
   // #Q queries in parallel; `hints` is empty or #Q faces (-1 for none). Deterministic.
   std::vector<ClosestPoint> closest_points(PointsRef queries,
                                            std::span<const int> hints = {}) const;
+  // #Q queries in parallel that look no farther than max_distance: face −1 (and nothing else
+  // set) where no face of Φ is that near; otherwise the same answer as closest_points. Far
+  // queries then cost little.
+  std::vector<ClosestPoint> closest_points_within(PointsRef queries, double max_distance) const;
   // Same into caller storage, on the calling thread only (for use inside parallel tasks).
   void closest_points_serial(PointsRef queries, std::span<const int> hints,
                              std::span<ClosestPoint> out) const;

@@ -324,7 +324,7 @@ Patch evaluate_patch(const SurfaceIndex& index, const Motion& motion, const Cutt
       Points queries(static_cast<Eigen::Index>(near.size()), 3);
       for (std::size_t k = 0; k < near.size(); ++k) queries.row(static_cast<Eigen::Index>(k)) = phi.V.row(near[k]);
       const SurfaceIndex omega_index(omega);
-      const std::vector<ClosestPoint> cp = omega_index.closest_points(queries);
+      const std::vector<ClosestPoint> cp = omega_index.closest_points_within(queries, band);
       const Points normals = vertex_normals(phi);
       for (std::size_t k = 0; k < near.size(); ++k) {
         const ClosestPoint& f = cp[k];
@@ -397,7 +397,7 @@ Patch evaluate_patch(const SurfaceIndex& index, const Motion& motion, const Cutt
       const std::vector<int> near = vertices_near(phi, omega, options.tolerance);
       Points queries(static_cast<Eigen::Index>(near.size()), 3);
       for (std::size_t k = 0; k < near.size(); ++k) queries.row(static_cast<Eigen::Index>(k)) = phi.V.row(near[k]);
-      const std::vector<ClosestPoint> cp = omega_index.closest_points(queries);
+      const std::vector<ClosestPoint> cp = omega_index.closest_points_within(queries, options.tolerance);
       const VecX area = vertex_areas(phi);
       double covered = 0.0;
       for (std::size_t k = 0; k < near.size(); ++k) {

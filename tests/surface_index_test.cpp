@@ -370,6 +370,36 @@ TEST(SurfaceIndex, MatchesBruteForceOnSliversFarFromOrigin) {
   check_against_brute_force(m, make_queries(m, 250 * kQueryScale, 47), 53);
 }
 
+// A bounded query answers exactly as an unbounded one where Φ is within the bound (a face at
+// exactly the bound included) and says "none" beyond it, with both engines.
+TEST(SurfaceIndex, BoundedQueriesAnswerWithinTheBound) {
+  const Mesh m = perturbed_grid(61);
+  const Points Q = make_queries(m, 400, 67);
+  for (const QueryEngine engine : {QueryEngine::kBoxTree, QueryEngine::kEmbree}) {
+    SCOPED_TRACE(engine == QueryEngine::kEmbree ? "Embree" : "box tree");
+    const SurfaceIndex index(m, engine);
+    const std::vector<ClosestPoint> all = index.closest_points(Q);
+    std::vector<double> d;
+    for (const ClosestPoint& c : all) d.push_back(c.distance);
+    std::sort(d.begin(), d.end());
+    for (const double bound : {0.0, d[d.size() / 4], d[d.size() / 2], d.back() * 2.0}) {
+      const std::vector<ClosestPoint> within = index.closest_points_within(Q, bound);
+      int inside = 0;
+      for (std::size_t i = 0; i < all.size(); ++i) {
+        if (all[i].distance <= bound) {
+          ++inside;
+          expect_same(within[i], all[i]);
+        } else {
+          EXPECT_EQ(within[i].face, -1) << i;
+        }
+      }
+      if (bound > 0.0) {
+        EXPECT_GT(inside, 0);
+      }
+    }
+  }
+}
+
 TEST(SurfaceIndex, BatchedParallelEqualsSerial) {
   const Mesh m = perturbed_grid(37);
   const SurfaceIndex index(m);
