@@ -21,7 +21,7 @@ namespace flank::bench {
 inline void run_decompose(benchmark::State& state, const Mesh& mesh, double tolerance_rel,
                           const std::vector<CutterKind>& kinds) {
   StageTimes sum;
-  double index_s = 0, coverage = 0, patches = 0, lines_scored = 0, grown = 0;
+  double index_s = 0, coverage = 0, patches = 0, lines_scored = 0, grown = 0, regrown = 0;
   for (auto _ : state) {
     const auto t0 = std::chrono::steady_clock::now();
     const SurfaceIndex index(mesh);
@@ -31,11 +31,12 @@ inline void run_decompose(benchmark::State& state, const Mesh& mesh, double tole
     o.kinds = kinds;
     const DecomposeResult result = decompose(index, o);
     sum.seeds += result.times.seeds, sum.candidates += result.times.candidates;
-    sum.fit += result.times.fit, sum.cover += result.times.cover;
+    sum.fit += result.times.fit, sum.cover += result.times.cover, sum.finish += result.times.finish;
     coverage = result.coverage;
     patches = static_cast<double>(result.patches.size());
     lines_scored = static_cast<double>(result.lines_scored);
     grown = result.grown;
+    regrown = result.regrown;
   }
   const double n = static_cast<double>(state.iterations());
   state.counters["triangles"] = static_cast<double>(mesh.face_count());
@@ -45,10 +46,12 @@ inline void run_decompose(benchmark::State& state, const Mesh& mesh, double tole
   state.counters["candidates_s"] = sum.candidates / n;
   state.counters["fit_s"] = sum.fit / n;
   state.counters["cover_s"] = sum.cover / n;
+  state.counters["finish_s"] = sum.finish / n;
   state.counters["coverage"] = coverage;
   state.counters["patches"] = patches;
   state.counters["lines_scored"] = lines_scored;
   state.counters["grown"] = grown;  // candidates propagated and fitted: the fit stage's work
+  state.counters["regrown"] = regrown;  // candidates an earlier round had grown, reused
 }
 
 // fit_motion from `start`. Counters: GN iterations, samples per iteration, closest-point

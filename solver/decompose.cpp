@@ -114,6 +114,28 @@ bool already_claimed(const SurfaceIndex& index, const LineCandidate& c, const st
   return false;
 }
 
+// A later round often lays out exactly a line an earlier one grew: where the cover changed
+// little, the same seeds find the same lines, and growth is deterministic. Its result is
+// remembered and reused (the same pieces, in the same place of the pool), not fitted again.
+struct GrownCache {
+  struct Entry {
+    Line line;
+    CutterKind kind;
+    std::vector<Line> rulings;
+    Grown grown;
+  };
+  std::vector<Entry> entries;
+
+  static bool same(const Line& x, const Line& y) { return x.a == y.a && x.b == y.b; }
+  const Grown* find(const LineCandidate& c) const {
+    for (const Entry& e : entries) {
+      if (e.kind != c.kind || !same(e.line, c.line) || e.rulings.size() != c.sweep.rulings.size()) continue;
+      if (std::equal(e.rulings.begin(), e.rulings.end(), c.sweep.rulings.begin(), same)) return &e.grown;
+    }
+    return nullptr;
+  }
+};
+
 }  // namespace
 
 DecomposeResult decompose(const SurfaceIndex& index, const DecomposeOptions& o, const ProgressFn& progress) {
@@ -180,6 +202,7 @@ DecomposeResult decompose(const SurfaceIndex& index, const DecomposeOptions& o, 
   co.min_gain = o.min_gain;
 
   std::vector<Patch> pool;                       // every valid candidate patch, in a deterministic order
+  GrownCache cache;                              // every candidate grown so far
   std::vector<Claim> claims;                     // of every pool entry
   for (int round = 0; round < o.max_rounds; ++round) {
     const std::size_t picks_before = cover.picks.size();
@@ -244,9 +267,17 @@ DecomposeResult decompose(const SurfaceIndex& index, const DecomposeOptions& o, 
       }
       if (batch.empty()) break;
       std::vector<Grown> grown(batch.size());
-      parallel_invoke_each(batch.size(), [&](std::size_t k) { grown[k] = grow_patch(work, *batch[k], go); });
-      for (Grown& g : grown) {
-        ++out.grown;
+      std::vector<const Grown*> known(batch.size());
+      for (std::size_t k = 0; k < batch.size(); ++k) known[k] = o.reuse_grown ? cache.find(*batch[k]) : nullptr;
+      parallel_invoke_each(batch.size(), [&](std::size_t k) {
+        grown[k] = known[k] ? *known[k] : grow_patch(work, *batch[k], go);
+      });
+      for (std::size_t k = 0; k < batch.size(); ++k)
+        if (o.reuse_grown && !known[k])
+          cache.entries.push_back({batch[k]->line, batch[k]->kind, batch[k]->sweep.rulings, grown[k]});
+      for (std::size_t k = 0; k < batch.size(); ++k) {
+        Grown& g = grown[k];
+        ++(known[k] ? out.regrown : out.grown);
         ++grown_this_round;
         for (Patch& p : g.patches) {
           ++out.candidates_valid;

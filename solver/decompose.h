@@ -56,6 +56,9 @@ struct DecomposeOptions {
   // result does not depend on the thread count). The fit's samples and control points.
   int grow_per_round = 16;
   int batch = 8;
+  // A later round that lays out exactly a line an earlier one grew reuses that growth's pieces
+  // instead of fitting them again (growth is deterministic: the same pieces either way).
+  bool reuse_grown = true;
   int control_points = 16, samples_t = 48, samples_s = 16, iterations = 10;
   // How far an accepted Gauss–Newton step may be extended (FitOptions::max_extrapolations:
   // up to 2^this steps): a candidate needs the patch's extent, not the last digit of its cutter
@@ -102,6 +105,7 @@ struct DecomposeResult {
   long long lines_scored = 0;          // candidate lines whose footpoints were queried
   int candidates = 0;                  // candidate lines laid out and swept
   int grown = 0;                       // candidates fitted
+  int regrown = 0;                     // candidates an earlier round had grown: reused, not fitted
   int candidates_valid = 0;            // candidate patches (pieces) valid as tools
 };
 

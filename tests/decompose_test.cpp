@@ -138,6 +138,28 @@ TEST(Decompose, SameResultWhateverTheThreadCount) {
   }
 }
 
+// A later round that lays out a line an earlier round grew reuses its pieces: on this face it
+// happens (regrown > 0), and the result is the one of fitting them again, patch for patch.
+TEST(DecomposeRealFace, ReusingEarlierGrowthChangesNothing) {
+  const Mesh mesh = io::read_mesh(FLANK_TEST_DATA_DIR "/hecc_splitter_blade_side_a.stl").mesh;
+  const SurfaceIndex index(mesh);
+  DecomposeOptions o;
+  o.tolerance = 1e-4 * index.diagonal();
+  const DecomposeResult reused = decompose(index, o);
+  o.reuse_grown = false;
+  const DecomposeResult fitted = decompose(index, o);
+  EXPECT_GT(reused.regrown, 0);
+  EXPECT_EQ(fitted.regrown, 0);
+  EXPECT_EQ(reused.grown + reused.regrown, fitted.grown);
+  EXPECT_EQ(reused.coverage_curve, fitted.coverage_curve);
+  ASSERT_EQ(reused.patches.size(), fitted.patches.size());
+  for (std::size_t k = 0; k < reused.patches.size(); ++k) {
+    EXPECT_EQ(reused.patches[k].motion.a, fitted.patches[k].motion.a);
+    EXPECT_EQ(reused.patches[k].motion.b, fitted.patches[k].motion.b);
+    EXPECT_EQ(reused.patches[k].cutter.coeffs, fitted.patches[k].cutter.coeffs);
+  }
+}
+
 TEST(Decompose, ImpossibleToleranceGivesNoPatch) {
   const SynthResult part = testing::paper_part(PaperTool::cylinder, 61, 21);
   const SurfaceIndex index(part.mesh);
