@@ -696,9 +696,12 @@ std::vector<ClosestPoint> SurfaceIndex::closest_points(PointsRef queries,
   parallel_for(
       0, count,
       [&](std::size_t begin, std::size_t end) {
+        // Without a hint, the previous query's face: batches are coherent (along lines, rows).
+        int previous = -1;
         for (std::size_t i = begin; i < end; ++i) {
-          const int hint = i < hints.size() ? hints[i] : -1;
+          const int hint = i < hints.size() ? hints[i] : previous;
           out[i] = m.query(queries.row(static_cast<Eigen::Index>(i)), hint);
+          previous = out[i].face;
         }
       },
       64);
@@ -725,9 +728,11 @@ void SurfaceIndex::closest_points_serial(PointsRef queries, std::span<const int>
   assert(out.size() == static_cast<std::size_t>(queries.rows()));
   const std::size_t count = std::min(out.size(), static_cast<std::size_t>(queries.rows()));
   const Impl& m = *impl_;
+  int previous = -1;
   for (std::size_t i = 0; i < count; ++i) {
-    const int hint = i < hints.size() ? hints[i] : -1;
+    const int hint = i < hints.size() ? hints[i] : previous;
     out[i] = m.query(queries.row(static_cast<Eigen::Index>(i)), hint);
+    previous = out[i].face;
   }
 }
 

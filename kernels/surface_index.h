@@ -56,14 +56,17 @@ class SurfaceIndex {
   // by the exact distance to that face: the warm start for coherent queries.
   ClosestPoint closest_point(const Vec3& p, int hint_face = -1) const;
 
-  // #Q queries in parallel; `hints` is empty or #Q faces (-1 for none). Deterministic.
+  // #Q queries in parallel; `hints` is empty or #Q faces (-1 for none). With no hints, each
+  // query starts from the previous one's face (queries in a batch are usually coherent: along
+  // a line, a row of a grid). Hints never change an answer. Deterministic.
   std::vector<ClosestPoint> closest_points(PointsRef queries,
                                            std::span<const int> hints = {}) const;
   // #Q queries in parallel that look no farther than max_distance: face −1 (and nothing else
   // set) where no face of Φ is that near; otherwise the same answer as closest_points. Far
   // queries then cost little.
   std::vector<ClosestPoint> closest_points_within(PointsRef queries, double max_distance) const;
-  // Same into caller storage, on the calling thread only (for use inside parallel tasks).
+  // Same into caller storage, on the calling thread only (for use inside parallel tasks), with
+  // the same chaining when `hints` is empty.
   void closest_points_serial(PointsRef queries, std::span<const int> hints,
                              std::span<ClosestPoint> out) const;
 
