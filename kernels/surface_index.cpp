@@ -269,6 +269,11 @@ struct SurfaceIndex::Impl {
   std::vector<LeafPack> packs;              // kBoxTree: per leaf of tree.leaves()
   std::vector<std::uint8_t> edge_boundary;  // per face, bit k: edge (k, k+1 mod 3) is a boundary
   std::vector<std::uint8_t> vertex_boundary;
+  // For queries over a subset of the faces: the faces' edge slots (3 f + k) grouped by edge
+  // (slots of group g: edge_slots[edge_start[g] .. edge_start[g + 1])), each slot's group, and
+  // each vertex's faces (vertex_faces[vertex_start[v] .. vertex_start[v + 1])).
+  std::vector<std::int32_t> edge_start, edge_slots, slot_edge;
+  std::vector<std::int32_t> vertex_start, vertex_faces;
   Vec3 origin = Vec3::Zero();  // bbox centre; Embree gets coordinates relative to it
   double diagonal = 0.0;
   double slack = 0.0;       // absolute part of the conservative float radius
@@ -294,12 +299,15 @@ struct SurfaceIndex::Impl {
   }
 
   void build_adjacency();
+  bool masked_edge_boundary(int group, const char* mask) const;
+  bool masked_on_boundary(int f, int region, const char* mask) const;
   void build_scene();
   void build_tree(const std::vector<Corners>& corners, double pad);
 
-  // Only faces within max_distance count (infinity: all).
-  ClosestPoint query(const Vec3& p, int hint_face, double max_distance = kInf) const;
-  ClosestPoint query_once(const Vec3& p, int hint_face, double max_distance) const;
+  // Only faces within max_distance count (infinity: all), and only those with mask[f] != 0
+  // (null: all), as if the index held those alone.
+  ClosestPoint query(const Vec3& p, int hint_face, double max_distance = kInf, const char* mask = nullptr) const;
+  ClosestPoint query_once(const Vec3& p, int hint_face, double max_distance, const char* mask) const;
 };
 
 void SurfaceIndex::Impl::build_adjacency() {
@@ -316,9 +324,18 @@ void SurfaceIndex::Impl::build_adjacency() {
   std::sort(edges.begin(), edges.end());
   edge_boundary.assign(static_cast<std::size_t>(nf), 0);
   vertex_boundary.assign(static_cast<std::size_t>(mesh.vertex_count()), 0);
+  edge_start.clear();
+  edge_slots.resize(edges.size());
+  slot_edge.resize(edges.size());
   for (std::size_t i = 0; i < edges.size();) {
     std::size_t j = i + 1;
     while (j < edges.size() && edges[j].first == edges[i].first) ++j;
+    const auto group = static_cast<std::int32_t>(edge_start.size());
+    edge_start.push_back(static_cast<std::int32_t>(i));
+    for (std::size_t k = i; k < j; ++k) {
+      edge_slots[k] = edges[k].second;
+      slot_edge[static_cast<std::size_t>(edges[k].second)] = group;
+    }
     if (j - i == 1) {  // an edge of exactly one face
       const int f = edges[i].second / 3;
       const int k = edges[i].second % 3;
@@ -328,6 +345,38 @@ void SurfaceIndex::Impl::build_adjacency() {
     }
     i = j;
   }
+  edge_start.push_back(static_cast<std::int32_t>(edges.size()));
+  const int nv = mesh.vertex_count();
+  vertex_start.assign(static_cast<std::size_t>(nv) + 1, 0);
+  for (int f = 0; f < nf; ++f)
+    for (int k = 0; k < 3; ++k) ++vertex_start[static_cast<std::size_t>(mesh.F(f, k)) + 1];
+  for (int v = 0; v < nv; ++v) vertex_start[static_cast<std::size_t>(v) + 1] += vertex_start[static_cast<std::size_t>(v)];
+  vertex_faces.resize(static_cast<std::size_t>(3) * nf);
+  std::vector<std::int32_t> fill(vertex_start.begin(), vertex_start.end() - 1);
+  for (int f = 0; f < nf; ++f)
+    for (int k = 0; k < 3; ++k) vertex_faces[static_cast<std::size_t>(fill[static_cast<std::size_t>(mesh.F(f, k))]++)] = f;
+}
+
+bool SurfaceIndex::Impl::masked_edge_boundary(int group, const char* mask) const {
+  int in = 0;
+  for (std::int32_t i = edge_start[static_cast<std::size_t>(group)]; i < edge_start[static_cast<std::size_t>(group) + 1]; ++i)
+    in += mask[edge_slots[static_cast<std::size_t>(i)] / 3] != 0;
+  return in == 1;
+}
+
+bool SurfaceIndex::Impl::masked_on_boundary(int f, int region, const char* mask) const {
+  if (region >= 1 && region <= 3) return masked_edge_boundary(slot_edge[static_cast<std::size_t>(3 * f + region - 1)], mask);
+  if (region < 4) return false;
+  // A vertex on an edge that exactly one face of the subset has.
+  const int v = mesh.F(f, region - 4);
+  for (std::int32_t i = vertex_start[static_cast<std::size_t>(v)]; i < vertex_start[static_cast<std::size_t>(v) + 1]; ++i) {
+    const int g = vertex_faces[static_cast<std::size_t>(i)];
+    if (!mask[g]) continue;
+    for (int k = 0; k < 3; ++k)
+      if ((mesh.F(g, k) == v || mesh.F(g, (k + 1) % 3) == v) && masked_edge_boundary(slot_edge[static_cast<std::size_t>(3 * g + k)], mask))
+        return true;
+  }
+  return false;
 }
 
 void SurfaceIndex::Impl::build_scene() {
@@ -383,6 +432,7 @@ struct QueryState {
   int best_face = kNoFace;
   int best_region = 0;
   double slack = 0.0;
+  const char* mask = nullptr;  // faces that count (null: all)
 
   // Exact distance to face f with corners a, b, c; keeps the lexicographic minimum of
   // (distance², face), so the answer does not depend on the visiting order (hint or not,
@@ -402,6 +452,7 @@ struct QueryState {
   }
   // The same behind the triangle's disc bound (Embree's path).
   bool consider(int f) {
+    if (mask && !mask[f]) return false;
     const Triangle& t = triangles[f];
     // d² ≥ lb² > best_d2: the triangle can neither win nor tie. The bound's own rounding is
     // under 1e-15 of (lb² + |p − centre|²); the margin is a thousandfold.
@@ -425,6 +476,10 @@ void visit_leaf(const LeafPack& k, const Corners* corners, const std::vector<int
   const Vec3 q = st.p - k.origin;
   const double reach = q.norm() + k.radius;
   std::uint32_t todo = (std::uint32_t{1} << k.count) - 1;
+  if (st.mask)
+    for (int l = 0; l < k.count; ++l)
+      if (!st.mask[faces[static_cast<std::size_t>(k.first + l)]]) todo &= ~(std::uint32_t{1} << l);
+  if (!todo) return;
   float d[LeafPack::kLanes];
   if (reach < kFloatReach) {
     lane_distances(k, static_cast<float>(q.x()), static_cast<float>(q.y()), static_cast<float>(q.z()), d);
@@ -464,29 +519,31 @@ bool point_query_callback(RTCPointQueryFunctionArguments* args) {
 
 }  // namespace
 
-ClosestPoint SurfaceIndex::Impl::query(const Vec3& p, int hint_face, double max_distance) const {
+ClosestPoint SurfaceIndex::Impl::query(const Vec3& p, int hint_face, double max_distance, const char* mask) const {
 #ifdef FLANK_SLOW_QUERIES
   // A deliberate regression for test builds only (CMake -DFLANK_SLOW_QUERIES=ON): every
   // query is answered twice. It exists to prove that `scripts/scaling-report --check` catches
   // a slowdown; release builds never define it.
-  volatile const int twice = query_once(p, hint_face, max_distance).face;
+  volatile const int twice = query_once(p, hint_face, max_distance, mask).face;
   (void)twice;
 #endif
-  return query_once(p, hint_face, max_distance);
+  return query_once(p, hint_face, max_distance, mask);
 }
 
-ClosestPoint SurfaceIndex::Impl::query_once(const Vec3& p, int hint_face, double max_distance) const {
+ClosestPoint SurfaceIndex::Impl::query_once(const Vec3& p, int hint_face, double max_distance,
+                                            const char* mask) const {
   ClosestPoint out;
   const int nf = mesh.face_count();
   if (nf == 0) return out;
 
   QueryState state{triangles.data(), p};
   state.slack = slack;
+  state.mask = mask;
   // A bound a little wide of max_distance² (its rounding), the answer checked against
   // max_distance itself below: a face at exactly max_distance counts.
   const double bound2 = max_distance < kInf ? max_distance * max_distance * (1.0 + 1e-12) : kInf;
   state.best_d2 = bound2;
-  const bool hinted = hint_face >= 0 && hint_face < nf;
+  const bool hinted = hint_face >= 0 && hint_face < nf && (!mask || mask[hint_face]);
   if (engine == QueryEngine::kEmbree) {
     alignas(16) RTCPointQuery q;
     q.x = static_cast<float>(p.x() - origin.x());
@@ -532,7 +589,9 @@ ClosestPoint SurfaceIndex::Impl::query_once(const Vec3& p, int hint_face, double
 
   bool on_boundary = false;
   const int region = state.best_region;
-  if (region >= 1 && region <= 3)
+  if (mask)
+    on_boundary = masked_on_boundary(f, region, mask);
+  else if (region >= 1 && region <= 3)
     on_boundary = (edge_boundary[static_cast<std::size_t>(f)] >> (region - 1)) & 1u;
   else if (region >= 4)
     on_boundary = vertex_boundary[static_cast<std::size_t>(mesh.F(f, region - 4))] != 0;
@@ -708,15 +767,19 @@ std::vector<ClosestPoint> SurfaceIndex::closest_points(PointsRef queries,
   return out;
 }
 
-std::vector<ClosestPoint> SurfaceIndex::closest_points_within(PointsRef queries, double max_distance) const {
+std::vector<ClosestPoint> SurfaceIndex::closest_points_within(PointsRef queries, double max_distance,
+                                                              std::span<const char> face_mask) const {
   assert(max_distance >= 0.0);
+  assert(face_mask.empty() || face_mask.size() == static_cast<std::size_t>(impl_->mesh.face_count()));
+  const char* mask = face_mask.empty() ? nullptr : face_mask.data();
   const auto count = static_cast<std::size_t>(queries.rows());
   std::vector<ClosestPoint> out(count);
   const Impl& m = *impl_;
   parallel_for(
       0, count,
       [&](std::size_t begin, std::size_t end) {
-        for (std::size_t i = begin; i < end; ++i) out[i] = m.query(queries.row(static_cast<Eigen::Index>(i)), -1, max_distance);
+        for (std::size_t i = begin; i < end; ++i)
+          out[i] = m.query(queries.row(static_cast<Eigen::Index>(i)), -1, max_distance, mask);
       },
       64);
   return out;

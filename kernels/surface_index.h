@@ -63,8 +63,11 @@ class SurfaceIndex {
                                            std::span<const int> hints = {}) const;
   // #Q queries in parallel that look no farther than max_distance: face −1 (and nothing else
   // set) where no face of Φ is that near; otherwise the same answer as closest_points. Far
-  // queries then cost little.
-  std::vector<ClosestPoint> closest_points_within(PointsRef queries, double max_distance) const;
+  // queries then cost little. `face_mask` (empty, or #F 0/1): only the faces marked 1 count,
+  // and the answer (face, boundary flags) is the one an index built over those faces alone,
+  // in the same order, would give: one index serves several subsets of one surface.
+  std::vector<ClosestPoint> closest_points_within(PointsRef queries, double max_distance,
+                                                  std::span<const char> face_mask = {}) const;
   // Same into caller storage, on the calling thread only (for use inside parallel tasks), with
   // the same chaining when `hints` is empty.
   void closest_points_serial(PointsRef queries, std::span<const int> hints,

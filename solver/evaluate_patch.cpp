@@ -3,6 +3,8 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <memory>
+#include <optional>
 
 #include "kernels/envelope.h"
 #include "kernels/parallel.h"
@@ -259,17 +261,49 @@ double refined_max(const SurfaceIndex& index, const Motion& motion, const Cutter
 // cos 30°: how nearly along Φ's normal Ω's nearest point must lie for a vertex to be under Ω.
 constexpr double kUnderCosine = 0.8660254037844386;
 
-// Φ's vertices inside the bounding box of Ω's faces grown by `margin` (the only ones within
-// `margin` of Ω).
-std::vector<int> vertices_near(const Mesh& phi, const Mesh& omega, double margin) {
+// Ω over a grid as one mesh (two triangles per cell whose corners all have an envelope point)
+// and, made on first use, its index. The error seen from Φ's vertices and the coverage each
+// look at a part of it (over Φ; within the band of Φ) through a face mask: one index instead
+// of one per part, with the answers of each part's own index.
+class OmegaSurface {
+ public:
+  explicit OmegaSurface(const ErrorGrid& grid) : mesh_(envelope_mesh(grid, nullptr)) {}
+  const Mesh& mesh() const { return mesh_; }
+  const SurfaceIndex& index() {
+    if (!index_) index_ = std::make_unique<SurfaceIndex>(mesh_);
+    return *index_;
+  }
+  // The faces whose three corners `keep` holds: the faces envelope_mesh(grid, &keep) has.
+  std::vector<char> mask(const std::vector<char>& keep) const {
+    std::vector<char> m(static_cast<std::size_t>(mesh_.face_count()));
+    for (int f = 0; f < mesh_.face_count(); ++f)
+      m[static_cast<std::size_t>(f)] = keep[static_cast<std::size_t>(mesh_.F(f, 0))] &&
+                                       keep[static_cast<std::size_t>(mesh_.F(f, 1))] &&
+                                       keep[static_cast<std::size_t>(mesh_.F(f, 2))];
+    return m;
+  }
+
+ private:
+  Mesh mesh_;
+  std::unique_ptr<SurfaceIndex> index_;
+};
+
+// Φ's vertices inside the bounding box of Ω's faces (those `mask` marks) grown by `margin`
+// (the only ones within `margin` of them). Empty when no face is marked.
+std::vector<int> vertices_near(const Mesh& phi, const Mesh& omega, const std::vector<char>& mask, double margin) {
   Vec3 lo = Vec3::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
-  for (Eigen::Index f = 0; f < omega.F.rows(); ++f)
+  bool any = false;
+  for (Eigen::Index f = 0; f < omega.F.rows(); ++f) {
+    if (!mask[static_cast<std::size_t>(f)]) continue;
+    any = true;
     for (int c = 0; c < 3; ++c) {
       lo = lo.cwiseMin(Vec3(omega.V.row(omega.F(f, c)).transpose()));
       hi = hi.cwiseMax(Vec3(omega.V.row(omega.F(f, c)).transpose()));
     }
-  lo.array() -= margin, hi.array() += margin;
+  }
   std::vector<int> near;
+  if (!any) return near;
+  lo.array() -= margin, hi.array() += margin;
   for (int v = 0; v < phi.vertex_count(); ++v) {
     const Vec3 p = phi.V.row(v).transpose();
     if ((p.array() >= lo.array()).all() && (p.array() <= hi.array()).all()) near.push_back(v);
@@ -313,18 +347,25 @@ Patch evaluate_patch(const SurfaceIndex& index, const Motion& motion, const Cutt
   // The deviation seen from Φ's vertices under Ω as well: samples of Ω fall between the peaks
   // of a scanned Φ (its noise sits at the vertices), so its largest deviation depends on the
   // sampling; at the vertices it does not. tests/check_patches.py measures the same union.
+  // Ω's mesh and index, one per grid: on a smoothed scan the reported grid is another one.
+  std::optional<OmegaSurface> omega_grid, omega_reported;
+  const auto omega_of = [&](const ErrorGrid& g) -> OmegaSurface& {
+    std::optional<OmegaSurface>& o = &g == &grid ? omega_grid : omega_reported;
+    if (!o) o.emplace(g);
+    return *o;
+  };
   if (options.vertex_side) {
     // Over the part of Ω whose points lie over Φ, as the grid's errors.
-    const Mesh omega = envelope_mesh(reported, &reported.omega_interior);
+    OmegaSurface& omega = omega_of(reported);
+    const std::vector<char> over = omega.mask(reported.omega_interior);
     const SurfaceIndex* phi_index = given ? given : &index;
-    if (omega.F.rows() > 0) {
-      const double band = options.vertex_band * options.tolerance;
-      const std::vector<int> near = vertices_near(phi_index->mesh(), omega, band);
+    const double band = options.vertex_band * options.tolerance;
+    const std::vector<int> near = vertices_near(phi_index->mesh(), omega.mesh(), over, band);
+    if (!near.empty()) {
       const Mesh& phi = phi_index->mesh();
       Points queries(static_cast<Eigen::Index>(near.size()), 3);
       for (std::size_t k = 0; k < near.size(); ++k) queries.row(static_cast<Eigen::Index>(k)) = phi.V.row(near[k]);
-      const SurfaceIndex omega_index(omega);
-      const std::vector<ClosestPoint> cp = omega_index.closest_points_within(queries, band);
+      const std::vector<ClosestPoint> cp = omega.index().closest_points_within(queries, band, over);
       const Points normals = vertex_normals(phi);
       for (std::size_t k = 0; k < near.size(); ++k) {
         const ClosestPoint& f = cp[k];
@@ -370,7 +411,7 @@ Patch evaluate_patch(const SurfaceIndex& index, const Motion& motion, const Cutt
   }
 
   if (options.envelope) {
-    const Mesh omega = envelope_mesh(grid, nullptr);
+    const Mesh& omega = omega_of(grid).mesh();
     patch.envelope.V = omega.V;
     patch.envelope.F = omega.F;
     patch.envelope.rows = grid.rows;
@@ -389,15 +430,15 @@ Patch evaluate_patch(const SurfaceIndex& index, const Motion& motion, const Cutt
       good[k] = reported.omega_valid[k] &&
                 (!reported.omega_interior[k] ||
                  std::abs(reported.error(static_cast<Eigen::Index>(k))) <= options.omega_band * options.tolerance);
-    const Mesh omega = envelope_mesh(grid, &good);
-    if (omega.F.rows() > 0) {
-      const SurfaceIndex omega_index(omega);
-      // Only the Φ vertices near Ω can be covered: query those.
-      const Mesh& phi = (given ? given : &index)->mesh();
-      const std::vector<int> near = vertices_near(phi, omega, options.tolerance);
+    OmegaSurface& omega = omega_of(grid);
+    const std::vector<char> cuts = omega.mask(good);
+    // Only the Φ vertices near Ω can be covered: query those.
+    const Mesh& phi = (given ? given : &index)->mesh();
+    const std::vector<int> near = vertices_near(phi, omega.mesh(), cuts, options.tolerance);
+    if (!near.empty()) {
       Points queries(static_cast<Eigen::Index>(near.size()), 3);
       for (std::size_t k = 0; k < near.size(); ++k) queries.row(static_cast<Eigen::Index>(k)) = phi.V.row(near[k]);
-      const std::vector<ClosestPoint> cp = omega_index.closest_points_within(queries, options.tolerance);
+      const std::vector<ClosestPoint> cp = omega.index().closest_points_within(queries, options.tolerance, cuts);
       const VecX area = vertex_areas(phi);
       double covered = 0.0;
       for (std::size_t k = 0; k < near.size(); ++k) {

@@ -400,6 +400,58 @@ TEST(SurfaceIndex, BoundedQueriesAnswerWithinTheBound) {
   }
 }
 
+// Queries over a subset of the faces answer as an index built over that subset alone (the
+// same vertices, the kept faces in their order): the same face, point and distance, and the
+// subset's own boundary (holes punched in the middle of the surface have edges too).
+TEST(SurfaceIndex, MaskedQueriesAnswerAsTheSubsetsOwnIndex) {
+  const Mesh m = perturbed_grid(71);
+  std::mt19937 rng(73);
+  std::uniform_real_distribution<double> u01(0.0, 1.0);
+  std::vector<char> mask(static_cast<std::size_t>(m.face_count()), 1);
+  // A few holes of neighbouring faces and scattered single faces left out.
+  for (int hole = 0; hole < 6; ++hole) {
+    const int f0 = static_cast<int>(u01(rng) * (m.face_count() - 200));
+    for (int f = f0; f < f0 + 40; ++f) mask[static_cast<std::size_t>(f)] = 0;
+  }
+  for (auto& c : mask)
+    if (u01(rng) < 0.05) c = 0;
+  Mesh sub;
+  sub.V = m.V;
+  std::vector<int> full_face;
+  for (int f = 0; f < m.face_count(); ++f)
+    if (mask[static_cast<std::size_t>(f)]) full_face.push_back(f);
+  sub.F.resize(static_cast<Eigen::Index>(full_face.size()), 3);
+  for (std::size_t i = 0; i < full_face.size(); ++i) sub.F.row(static_cast<Eigen::Index>(i)) = m.F.row(full_face[i]);
+  // Points near the surface (over holes and their edges too) and farther away.
+  const Points Q = make_queries(m, 600, 79);
+  for (const QueryEngine engine : {QueryEngine::kBoxTree, QueryEngine::kEmbree}) {
+    SCOPED_TRACE(engine == QueryEngine::kEmbree ? "Embree" : "box tree");
+    const SurfaceIndex whole(m, engine), own(sub, engine);
+    for (const double bound : {0.05, 1e9}) {
+      const std::vector<ClosestPoint> masked = whole.closest_points_within(Q, bound, mask);
+      const std::vector<ClosestPoint> alone = own.closest_points_within(Q, bound);
+      int boundary = 0;
+      for (std::size_t i = 0; i < masked.size(); ++i) {
+        const ClosestPoint& a = masked[i];
+        const ClosestPoint& b = alone[i];
+        ASSERT_EQ(a.face < 0, b.face < 0) << i;
+        if (b.face < 0) continue;
+        EXPECT_EQ(a.face, full_face[static_cast<std::size_t>(b.face)]) << i;
+        EXPECT_EQ(a.point, b.point) << i;
+        EXPECT_EQ(a.distance, b.distance) << i;
+        EXPECT_EQ(a.signed_distance, b.signed_distance) << i;
+        EXPECT_EQ(a.direction, b.direction) << i;
+        EXPECT_EQ(a.boundary, b.boundary) << i;
+        EXPECT_EQ(a.on_boundary, b.on_boundary) << i;
+        boundary += b.on_boundary;
+      }
+      if (bound > 1.0) {
+        EXPECT_GT(boundary, 10);  // the holes' edges are met
+      }
+    }
+  }
+}
+
 TEST(SurfaceIndex, BatchedParallelEqualsSerial) {
   const Mesh m = perturbed_grid(37);
   const SurfaceIndex index(m);
