@@ -54,7 +54,10 @@ SUB_STAGES = [
 # Sub-stages that do work only when decompose grows candidates (the `grown` counter): on a rung
 # where nothing was grown they measure an empty loop, so they are left out of plots and slopes.
 NEEDS_GROWN = {"fit_s", "cover_s"}
-PART_ORDER = ["cone", "blade"]
+# The synthetic cone, the subdivided propeller blade, then the real faces of tests/data.
+PART_ORDER = ["cone", "blade", "hecc_a", "hecc_b", "rotor_upper", "rotor_lower"]
+# Plots with one panel per part wrap into rows of at most this many panels.
+PANELS_PER_ROW = 3
 
 
 class InputError(Exception):
@@ -240,7 +243,7 @@ def ladder(benches):
 
 
 def parts_of(lad):
-    """Parts in display order: cone, blade, then any others."""
+    """Parts in display order: those of PART_ORDER, then any others."""
     found = {k[1] for k in lad}
     return [p for p in PART_ORDER if p in found] + sorted(found - set(PART_ORDER))
 
@@ -396,6 +399,19 @@ def human_time(s):
     return f"{sig3(s / 1e-9)} ns"
 
 
+def tolerance_text(x):
+    """A relative tolerance as 1e-4, 3e-4; "n/a" for None."""
+    if x is None:
+        return "n/a"
+    mantissa, exponent = f"{x:.0e}".split("e")
+    return f"{mantissa}e{int(exponent)}"
+
+
+def count_text(x):
+    """A count as a whole number; "n/a" for None."""
+    return "n/a" if x is None else str(round(x))
+
+
 def pct(x):
     return "n/a" if x is None else f"{sig3(100 * x)} %"
 
@@ -417,6 +433,31 @@ def _colour(i):
 def _panels(plt, nrows, ncols, height=4.2):
     fig, axes = plt.subplots(nrows, ncols, figsize=(6.4 * ncols, height * nrows), squeeze=False)
     return fig, axes
+
+
+def panel_grid(count):
+    """(rows, columns) of `count` per-part panels, at most PANELS_PER_ROW to a row."""
+    count = max(count, 1)
+    cols = min(count, PANELS_PER_ROW)
+    return math.ceil(count / cols), cols
+
+
+def _part_panels(plt, parts, height, stacked=1):
+    """A figure with `stacked` panels one above the other per part, the parts wrapped into
+    rows of at most PANELS_PER_ROW; [[axes of the part, top to bottom]] in the parts' order.
+    The cells the last row leaves empty are removed."""
+    rows, cols = panel_grid(len(parts))
+    fig, axes = _panels(plt, rows * stacked, cols, height)
+    per_part = []
+    for i in range(rows * cols):
+        row, col = divmod(i, cols)
+        cell = [axes[row * stacked + k][col] for k in range(stacked)]
+        if i < len(parts):
+            per_part.append(cell)
+        else:
+            for ax in cell:
+                fig.delaxes(ax)
+    return fig, per_part
 
 
 def _no_data(ax):
@@ -453,8 +494,8 @@ def _save(plt, fig, path):
 def plot_stages(plt, lad, path):
     """Log-log time vs triangles per part; solid 2 threads, dashed 1 thread."""
     parts = parts_of(lad)
-    fig, axes = _panels(plt, 1, len(parts), 5.0)
-    for ax, part in zip(axes[0], parts):
+    fig, panels = _part_panels(plt, parts, 5.0)
+    for (ax,), part in zip(panels, parts):
         drawn = False
         for i, (name, label) in enumerate(stage_names()):
             marker = ("D" if name == "query" else "o") if name in STAGES else "s"
@@ -473,14 +514,15 @@ def plot_stages(plt, lad, path):
         ax.set_yscale("log")
         _decorate(ax, "median time (s)",
                   f"{part}: time per stage (solid 2 threads, dashed 1 thread)", 2)
+    fig.tight_layout()  # the legends below a row of panels push the next row down
     _save(plt, fig, path)
 
 
 def plot_speedup(plt, lad, path):
     """Speed-up t1/t2 vs triangles per part and stage."""
     parts = parts_of(lad)
-    fig, axes = _panels(plt, 1, len(parts), 4.6)
-    for ax, part in zip(axes[0], parts):
+    fig, panels = _part_panels(plt, parts, 4.6)
+    for (ax,), part in zip(panels, parts):
         ymax = 2.2
         for i, (name, label) in enumerate(stage_names()):
             s1, s2 = dict(series(lad, name, part, 1)), dict(series(lad, name, part, 2))
@@ -495,6 +537,7 @@ def plot_speedup(plt, lad, path):
         _log_x(ax)
         ax.set_ylim(0, ymax)
         _decorate(ax, "speed-up  t(1 thread) / t(2 threads)", f"{part}: 2-thread speed-up", 3)
+    fig.tight_layout()  # the legends below a row of panels push the next row down
     _save(plt, fig, path)
 
 
@@ -502,9 +545,8 @@ def plot_scoring_vs_queries(plt, lad, path):
     """Scoring's sample queries/s vs raw cold queries/s, and their ratio."""
     parts = parts_of(lad)
     rows = scoring_rows(lad)
-    fig, axes = _panels(plt, 2, len(parts), 4.0)
-    for col, part in enumerate(parts):
-        top, bottom = axes[0][col], axes[1][col]
+    fig, panels = _part_panels(plt, parts, 4.0, stacked=2)
+    for (top, bottom), part in zip(panels, parts):
         ratio_max = 1.0
         for t, style in ((2, "-"), (1, "--")):
             rs = [r for r in rows if r["part"] == part and r["threads"] == t and r["triangles"]]
@@ -540,8 +582,8 @@ def plot_scoring_vs_queries(plt, lad, path):
     fig.tight_layout()
     # The rate panels share their labels: one legend above the figure, clear of the data.
     handles = {}
-    for ax in axes[0]:
-        for h, label in zip(*ax.get_legend_handles_labels()):
+    for top, _ in panels:
+        for h, label in zip(*top.get_legend_handles_labels()):
             handles.setdefault(label, h)
     if handles:
         fig.legend(list(handles.values()), list(handles), loc="lower center",
@@ -554,7 +596,11 @@ def plot_gn_share(plt, lad, path):
     rows = fit_rows(lad)
     names = [("query_share", "closest-point queries"), ("assembly_share", "assembly"),
              ("factor_share", "factorisation (CHOLMOD)"), ("other", "other")]
+    # One bar per rung, 0.6 inch apart so that their slanted labels do not overlap, plus the
+    # legend beside: wider than a panel when there are many (the six parts have 20 rungs).
+    bars = max(sum(1 for r in rows if r["threads"] == t) for t in (1, 2))
     fig, axes = _panels(plt, 2, 1, 3.8)
+    fig.set_figwidth(max(6.4, 2.0 + 0.6 * bars))
     for ax, t in zip(axes[:, 0], (2, 1)):
         rs = [r for r in rows if r["threads"] == t
               and any(r[n] is not None for n, _ in names[:3])]
@@ -677,17 +723,23 @@ def build_markdown(title, run_path, context, benches, base_path, base, lad):
 
     out += ["", "## What decompose did on each rung", "",
             "Decompose's time depends on what it finds as well as on the mesh: a rung where no "
-            "line was good enough to grow has no fit stage. Read its times with these counts "
-            "(ladder tolerance 1e-3 × diagonal).", ""]
+            "line was good enough to grow has no fit stage. Read its times with these counts, "
+            "and with the tolerance and cutter kinds the part ran at: 1e-3 × diagonal on cone "
+            "and blade, so that most rungs grow candidates; the acceptance tolerance 1e-4 × "
+            "diagonal with every cutter kind (the command line's defaults) on the real faces. "
+            "Runs that did not record them (n/a) ran at 1e-3.", ""]
+    order = {p: i for i, p in enumerate(parts_of(lad))}
     out.append(md_table(
-        ["part", "tri_k", "threads", "total", "candidates", "fit+grow", "lines scored", "grown",
-         "patches", "coverage"],
-        [[p, k, t, human_time(b.real_s), human_time(b.counters.get("candidates_s")),
+        ["part", "tri_k", "threads", "tolerance × diagonal", "cutter kinds", "total",
+         "candidates", "fit+grow", "lines scored", "grown", "patches", "coverage"],
+        [[p, k, t, tolerance_text(b.counters.get("tolerance_rel")),
+          count_text(b.counters.get("cutter_kinds")), human_time(b.real_s),
+          human_time(b.counters.get("candidates_s")),
           human_time(b.counters.get("fit_s")), sig3(b.counters.get("lines_scored")),
           sig3(b.counters.get("grown")), sig3(b.counters.get("patches")),
           pct(b.counters.get("coverage"))]
-         for (st, p, k, t), b in sorted(lad.items(), key=lambda kv: (
-             PART_ORDER.index(kv[0][1]) if kv[0][1] in PART_ORDER else 99, kv[0][2], kv[0][3]))
+         for (st, p, k, t), b in sorted(lad.items(), key=lambda kv: (order[kv[0][1]], kv[0][2],
+                                                                     kv[0][3]))
          if st == "decompose"]))
 
     out += ["", "## Slopes", "",

@@ -59,11 +59,15 @@ def gb_json(benchmarks, num_cpus=2):
             "benchmarks": entries}
 
 
-def ladder_run():
-    """A complete two-part, three-size, two-thread ladder."""
+FACES = ("hecc_a", "hecc_b", "rotor_upper", "rotor_lower")
+
+
+def ladder_run(parts=("cone", "blade"), sizes=(1, 4, 16), tolerance=1e-3, kinds=2):
+    """A complete ladder: every stage of each part at each size and 1 and 2 threads; decompose
+    at `tolerance` x diagonal with `kinds` cutter kinds."""
     out = {}
-    for part in ("cone", "blade"):
-        for tri_k in (1, 4, 16):
+    for part in parts:
+        for tri_k in sizes:
             tri = tri_k * 1000.0
             for t in (1, 2):
                 f = 1.0 if t == 1 else 0.55
@@ -82,7 +86,8 @@ def ladder_run():
                 out["Ladder/decompose" + base] = (1000.0 * tri_k ** 0.5 * f, 0.02, {
                     "triangles": tri, "index_s": 0.01, "seeds_s": 0.05 * tri_k ** 0.5,
                     "candidates_s": 0.3 * tri_k ** 0.5, "fit_s": 0.5 * tri_k ** 0.5,
-                    "cover_s": 0.1, "patches": 1.0, "coverage": 0.99, "lines_scored": 5e4})
+                    "cover_s": 0.1, "patches": 1.0, "coverage": 0.99, "lines_scored": 5e4,
+                    "tolerance_rel": tolerance, "cutter_kinds": float(kinds)})
     return out
 
 
@@ -401,6 +406,38 @@ class ScalingReportTest(unittest.TestCase):
             summary = json.load(f)
         for section in ("scoring_vs_queries", "parallel", "fit_vs_unavoidable", "slopes"):
             self.assertTrue(summary[section], section)
+
+    @unittest.skipUnless(HAVE_MATPLOTLIB, "matplotlib is not installed")
+    def test_report_with_the_real_faces(self):
+        # Six parts: cone and blade at 1e-3, the four faces native (24k) and subdivided (96k)
+        # at the acceptance tolerance with every cutter kind.
+        run_doc = ladder_run()
+        run_doc.update(ladder_run(FACES, (24, 96), tolerance=1e-4, kinds=4))
+        run = self.write("run.json", gb_json(run_doc))
+        _, benches = sr.load_run(run)
+        b = benches["Ladder/decompose/rotor_upper/tri_k:96/threads:2"]
+        self.assertEqual((b.stage, b.part, b.tri_k, b.threads), ("decompose", "rotor_upper", 96, 2))
+        lad = sr.ladder(benches)
+        self.assertEqual(sr.parts_of(lad), ["cone", "blade", *FACES])
+        self.assertIn(("rotor_upper", 24, 2), {(r["part"], r["tri_k"], r["threads"])
+                                               for r in sr.fit_rows(lad)})
+        slopes = {(r["part"], r["stage"]): r for r in sr.slope_rows(lad)}
+        self.assertAlmostEqual(slopes[("rotor_upper", "index")]["slope_threads_2"], 1.0)
+        self.assertEqual(sr.panel_grid(6), (2, 3))  # at most 3 panels to a row
+        self.assertEqual(sr.panel_grid(2), (1, 2))
+
+        out = os.path.join(self.dir, "report")
+        r = self.run_cli("report", "--json", run, "-o", out)
+        self.assertEqual(r.returncode, 0, r.stderr)
+        for name in ("stages.png", "speedup.png", "scoring_vs_queries.png", "gn_share.png"):
+            self.assertGreater(os.path.getsize(os.path.join(out, name)), 1000, name)
+        with open(os.path.join(out, "report.md"), encoding="utf-8") as f:
+            md = f.read()
+        # The decompose rows say the tolerance and cutter kinds each part ran at.
+        self.assertIn("| rotor_upper | 96 | 2 | 1e-4 | 4 |", md)
+        self.assertIn("| hecc_a | 24 | 1 | 1e-4 | 4 |", md)
+        self.assertIn("| cone | 16 | 2 | 1e-3 | 2 |", md)
+        self.assertIn("`Ladder/fit/rotor_lower/tri_k:24/threads:2`", md)
 
 
 if __name__ == "__main__":
