@@ -308,6 +308,9 @@ struct SurfaceIndex::Impl {
   // (null: all), as if the index held those alone.
   ClosestPoint query(const Vec3& p, int hint_face, double max_distance = kInf, const char* mask = nullptr) const;
   ClosestPoint query_once(const Vec3& p, int hint_face, double max_distance, const char* mask) const;
+  // #Q queries in parallel (see closest_points and closest_points_within).
+  std::vector<ClosestPoint> batch(PointsRef queries, std::span<const int> hints, double max_distance,
+                                  const char* mask) const;
 };
 
 void SurfaceIndex::Impl::build_adjacency() {
@@ -746,12 +749,11 @@ ClosestPoint SurfaceIndex::closest_point(const Vec3& p, int hint_face) const {
   return impl_->query(p, hint_face);
 }
 
-std::vector<ClosestPoint> SurfaceIndex::closest_points(PointsRef queries,
-                                                       std::span<const int> hints) const {
+std::vector<ClosestPoint> SurfaceIndex::Impl::batch(PointsRef queries, std::span<const int> hints,
+                                                    double max_distance, const char* mask) const {
   assert(hints.empty() || hints.size() == static_cast<std::size_t>(queries.rows()));
   const auto count = static_cast<std::size_t>(queries.rows());
   std::vector<ClosestPoint> out(count);
-  const Impl& m = *impl_;
   parallel_for(
       0, count,
       [&](std::size_t begin, std::size_t end) {
@@ -759,7 +761,7 @@ std::vector<ClosestPoint> SurfaceIndex::closest_points(PointsRef queries,
         int previous = -1;
         for (std::size_t i = begin; i < end; ++i) {
           const int hint = i < hints.size() ? hints[i] : previous;
-          out[i] = m.query(queries.row(static_cast<Eigen::Index>(i)), hint);
+          out[i] = query(queries.row(static_cast<Eigen::Index>(i)), hint, max_distance, mask);
           previous = out[i].face;
         }
       },
@@ -767,22 +769,16 @@ std::vector<ClosestPoint> SurfaceIndex::closest_points(PointsRef queries,
   return out;
 }
 
+std::vector<ClosestPoint> SurfaceIndex::closest_points(PointsRef queries,
+                                                       std::span<const int> hints) const {
+  return impl_->batch(queries, hints, kInf, nullptr);
+}
+
 std::vector<ClosestPoint> SurfaceIndex::closest_points_within(PointsRef queries, double max_distance,
                                                               std::span<const char> face_mask) const {
   assert(max_distance >= 0.0);
   assert(face_mask.empty() || face_mask.size() == static_cast<std::size_t>(impl_->mesh.face_count()));
-  const char* mask = face_mask.empty() ? nullptr : face_mask.data();
-  const auto count = static_cast<std::size_t>(queries.rows());
-  std::vector<ClosestPoint> out(count);
-  const Impl& m = *impl_;
-  parallel_for(
-      0, count,
-      [&](std::size_t begin, std::size_t end) {
-        for (std::size_t i = begin; i < end; ++i)
-          out[i] = m.query(queries.row(static_cast<Eigen::Index>(i)), -1, max_distance, mask);
-      },
-      64);
-  return out;
+  return impl_->batch(queries, {}, max_distance, face_mask.empty() ? nullptr : face_mask.data());
 }
 
 void SurfaceIndex::closest_points_serial(PointsRef queries, std::span<const int> hints,
