@@ -273,7 +273,8 @@ void write_outputs(io::OutputSet& out, const PatchArgs& a, const Design& design,
   const std::uintmax_t bytes = std::filesystem::file_size(std::filesystem::path(a.mesh), ec);
   run.input_bytes = ec ? -1 : static_cast<long long>(bytes);
   if (!a.no_report) report::write_report_html(out.staged("report.html"), run, patches, mesh, vertex_patch);
-  run.nurbs_deviation = report::write_patches_step(out.staged("patches.step"), patches, tolerance);
+  for (const report::WrittenFace& f : report::write_patches_step(out.staged("patches.step"), patches, tolerance))
+    run.nurbs.push_back({f.deviation, f.domain.t0, f.domain.t1, f.domain.s0, f.domain.s1});
   report::write_tools_step(out.staged("tools.step"), patches);
   report::write_patches_json(out.staged("patches.json"), run, patches);
   report::write_envelopes_ply(out.staged("envelopes.ply"), patches, tolerance);

@@ -237,11 +237,16 @@ void write_patches_json(const fs::path& path, const RunInfo& run, const std::vec
   for (std::size_t k = 0; k < patches.size(); ++k) {
     Json patch = patch_json(patches[k]);
     // patches.step's B-spline face of this patch and its measured deviation from the exact Ω.
-    if (k < run.nurbs_deviation.size()) {
-      const bool written = std::isfinite(run.nurbs_deviation[k]);
+    if (k < run.nurbs.size()) {
+      const RunInfo::Face& f = run.nurbs[k];
+      const bool written = std::isfinite(f.deviation);
       patch["nurbs"] = Json{{"file", "patches.step"},
                             {"face", written ? Json(face_name(patches[k])) : Json(nullptr)},
-                            {"max_deviation", number(run.nurbs_deviation[k])}};
+                            {"max_deviation", number(f.deviation)},
+                            // The face's own parameters are (t, s) over this range: where the motion
+                            // starts or ends with a stall, Ω does not exist and the face stops short.
+                            {"t_range", written ? Json{f.t0, f.t1} : Json(nullptr)},
+                            {"s_range", written ? Json{f.s0, f.s1} : Json(nullptr)}};
     }
     list.push_back(std::move(patch));
   }

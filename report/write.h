@@ -43,8 +43,13 @@ struct RunInfo {
   std::vector<Region> uncovered;
   std::vector<std::pair<std::string, double>> timing_s;  // index, candidates, fit, cover, total
   // Per patch, in order: the deviation of its B-spline face in patches.step from the exact Ω
-  // (NaN: no face written); empty when no patches.step was written.
-  std::vector<double> nurbs_deviation;
+  // (NaN: no face written) and the (t, s) range the face covers; empty when no patches.step
+  // was written.
+  struct Face {
+    double deviation = 0.0;
+    double t0 = 0.0, t1 = 1.0, s0 = 0.0, s1 = 1.0;
+  };
+  std::vector<Face> nurbs;
 };
 
 // The settings as one JSON object, in their order (patches.json and report.html show the same).

@@ -35,7 +35,16 @@ Eigen::SparseMatrix<double> basis_matrix(int n, int count) {
 
 // The tensor-product least-squares surface: on a full grid it separates, poles = Bu⁺ P Bv⁺ᵀ
 // per coordinate, each factor from banded normal equations.
-io::SplineSurface least_squares(const std::string& name, const Points& grid, int rows, int cols, int nu, int nv) {
+// Clamped uniform knots for `count` poles over [lo, hi].
+std::vector<double> knots_over(int count, double lo, double hi) {
+  std::vector<double> k = clamped_uniform_knots(count);
+  if (lo != 0.0 || hi != 1.0)
+    for (double& x : k) x = lo + (hi - lo) * x;
+  return k;
+}
+
+io::SplineSurface least_squares(const std::string& name, const Points& grid, int rows, int cols, int nu, int nv,
+                                const FaceDomain& domain) {
   const Eigen::SparseMatrix<double> Bu = basis_matrix(rows, nu), Bv = basis_matrix(cols, nv);
   const Eigen::SparseMatrix<double> Nu = Bu.transpose() * Bu, Nv = Bv.transpose() * Bv;
   const Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> su(Nu), sv(Nv);
@@ -51,7 +60,8 @@ io::SplineSurface least_squares(const std::string& name, const Points& grid, int
     for (int i = 0; i < nu; ++i)
       for (int j = 0; j < nv; ++j) poles(static_cast<Eigen::Index>(i) * nv + j, c) = both(i, j);
   }
-  return io::SplineSurface::from_poles(name, poles, nu, nv, clamped_uniform_knots(nu), clamped_uniform_knots(nv));
+  return io::SplineSurface::from_poles(name, poles, nu, nv, knots_over(nu, domain.t0, domain.t1),
+                                       knots_over(nv, domain.s0, domain.s1));
 }
 
 double deviation(const io::SplineSurface& surface, const Points& fine, int rows, int cols) {
@@ -68,7 +78,8 @@ double deviation(const io::SplineSurface& surface, const Points& fine, int rows,
 
 }  // namespace
 
-FittedSurface fit_exact_grid(const std::string& name, const Points& fine, int rows, int cols, double target) {
+FittedSurface fit_exact_grid(const std::string& name, const Points& fine, int rows, int cols, double target,
+                             const FaceDomain& domain) {
   const int fine_cols = 2 * cols - 1;
   Points grid(static_cast<Eigen::Index>(rows) * cols, 3);
   for (int i = 0; i < rows; ++i)
@@ -85,19 +96,20 @@ FittedSurface fit_exact_grid(const std::string& name, const Points& fine, int ro
     const int half = std::max(4, (points + 1) / 2);
     return more ? std::min(points, std::max({half, 24, static_cast<int>(std::ceil(0.8 * points))})) : half;
   };
-  FittedSurface best{least_squares(name, grid, rows, cols, poles(rows, false), poles(cols, false)), 0.0};
+  FittedSurface best{least_squares(name, grid, rows, cols, poles(rows, false), poles(cols, false), domain), 0.0};
   best.deviation = deviation(best.surface, fine, rows, cols);
   if (best.deviation <= target) return best;
-  FittedSurface full{least_squares(name, grid, rows, cols, poles(rows, true), poles(cols, true)), 0.0};
+  FittedSurface full{least_squares(name, grid, rows, cols, poles(rows, true), poles(cols, true), domain), 0.0};
   full.deviation = deviation(full.surface, fine, rows, cols);
   return full.deviation < best.deviation ? full : best;
 }
 
-bool exact_omega_grid(const Patch& p, int rows, int cols, Points& fine) {
+bool exact_omega_grid(const Patch& p, int& rows, int& cols, Points& fine, FaceDomain* domain, int margin) {
   const EnvelopeMesh& env = p.envelope;
   if (env.rows < 2 || env.cols < 2 || env.V.rows() != static_cast<Eigen::Index>(env.rows) * env.cols) return false;
   const int fr = 2 * rows - 1, fc = 2 * cols - 1;
-  fine.resize(static_cast<Eigen::Index>(fr) * fc, 3);
+  Points all(static_cast<Eigen::Index>(fr) * fc, 3);
+  std::vector<char> valid(static_cast<std::size_t>(fr) * fc, 0);
   auto V = [&](int a, int b) -> Vec3 { return env.V.row(static_cast<Eigen::Index>(a) * env.cols + b).transpose(); };
   for (int i = 0; i < fr; ++i) {
     const double t = i / static_cast<double>(fr - 1);
@@ -118,11 +130,51 @@ bool exact_omega_grid(const Patch& p, int rows, int cols, Points& fine) {
       const double d = p.cutter.radius(s), dd = p.cutter.slope(s);
       const EnvelopePoint plus = envelope_point(centre, rt, rs, d, dd, +1);
       const EnvelopePoint minus = envelope_point(centre, rt, rs, d, dd, -1);
-      if (!plus.valid || !minus.valid) return false;
+      const std::size_t k = static_cast<std::size_t>(i) * fc + j;
+      valid[k] = plus.valid && minus.valid && plus.point.allFinite() && minus.point.allFinite();
+      if (!valid[k]) continue;
       const Vec3 q = (plus.point - near).norm() <= (minus.point - near).norm() ? plus.point : minus.point;
-      fine.row(static_cast<Eigen::Index>(i) * fc + j) = q.transpose();
+      all.row(static_cast<Eigen::Index>(k)) = q.transpose();
     }
   }
+  // Rows and columns of the rows × cols grid, cut from the ends while the band of fine samples
+  // beside the kept rectangle's edge lacks Ω somewhere.
+  int r0 = 0, r1 = rows - 1, c0 = 0, c1 = cols - 1;
+  const auto band_has_gap = [&](int fi0, int fi1, int fj0, int fj1) {
+    for (int i = fi0; i <= fi1; ++i)
+      for (int j = fj0; j <= fj1; ++j)
+        if (!valid[static_cast<std::size_t>(i) * fc + j]) return true;
+    return false;
+  };
+  for (;;) {
+    if (r1 - r0 < 3 || c1 - c0 < 3) return false;
+    const int i0 = 2 * r0, i1 = 2 * r1, j0 = 2 * c0, j1 = 2 * c1;
+    if (!band_has_gap(i0, i1, j0, j1)) break;
+    if (band_has_gap(i0, i0 + 1, j0, j1)) ++r0;
+    else if (band_has_gap(i1 - 1, i1, j0, j1)) --r1;
+    else if (band_has_gap(i0, i1, j0, j0 + 1)) ++c0;
+    else if (band_has_gap(i0, i1, j1 - 1, j1)) --c1;
+    else return false;  // Ω is missing inside, not at an edge
+  }
+  // Next to where Ω ends it folds (its points race toward the edge) and no spline follows it:
+  // the caller may ask to keep `margin` rows or columns of the envelope grid farther off.
+  if (margin > 0) {
+    const int mr = margin * (rows - 1) / std::max(1, env.rows - 1), mc = margin * (cols - 1) / std::max(1, env.cols - 1);
+    if (r0 > 0) r0 += mr;
+    if (r1 < rows - 1) r1 -= mr;
+    if (c0 > 0) c0 += mc;
+    if (c1 < cols - 1) c1 -= mc;
+    if (r1 - r0 < 3 || c1 - c0 < 3) return false;
+  }
+  const int kr = r1 - r0 + 1, kc = c1 - c0 + 1, kfr = 2 * kr - 1, kfc = 2 * kc - 1;
+  fine.resize(static_cast<Eigen::Index>(kfr) * kfc, 3);
+  for (int i = 0; i < kfr; ++i)
+    for (int j = 0; j < kfc; ++j)
+      fine.row(static_cast<Eigen::Index>(i) * kfc + j) =
+          all.row(static_cast<Eigen::Index>(2 * r0 + i) * fc + 2 * c0 + j);
+  domain->t0 = r0 / static_cast<double>(rows - 1), domain->t1 = r1 / static_cast<double>(rows - 1);
+  domain->s0 = c0 / static_cast<double>(cols - 1), domain->s1 = c1 / static_cast<double>(cols - 1);
+  rows = kr, cols = kc;
   return fine.allFinite();
 }
 
@@ -161,32 +213,42 @@ std::string face_name(const Patch& p) {
 }
 std::string tool_name(const Patch& p) { return face_name(p) + "-tool"; }
 
-std::vector<double> write_patches_step(const std::filesystem::path& path, const std::vector<Patch>& patches,
-                                       double tolerance) {
-  std::vector<double> deviation(patches.size(), std::numeric_limits<double>::quiet_NaN());
+std::vector<WrittenFace> write_patches_step(const std::filesystem::path& path, const std::vector<Patch>& patches,
+                                            double tolerance) {
+  std::vector<WrittenFace> written(patches.size(), {std::numeric_limits<double>::quiet_NaN(), {}});
   std::vector<io::NamedSurface> faces;
   for (std::size_t k = 0; k < patches.size(); ++k) {
     const Patch& p = patches[k];
     // Ω's grid in the evaluation's (t, s) samples, then up to eight times as many rows (along
     // the motion, where a fitted motion's knots leave kinks) and columns, until the face is
     // within 1/150 of the tolerance (a margin under the 1% promised); else the closest.
+    // Where Ω ends inside the grid, a face that misses the target is tried again kept 1, 2, 4, 8
+    // envelope rows (columns) farther from that end.
     std::optional<FittedSurface> best;
-    for (const auto& [more_rows, more_cols] : {std::pair{1, 1}, {2, 1}, {2, 2}, {4, 2}, {4, 4}, {8, 4}, {8, 8}}) {
-      const int rows = (p.envelope.rows - 1) * more_rows + 1, cols = (p.envelope.cols - 1) * more_cols + 1;
-      Points fine;
-      if (!exact_omega_grid(p, rows, cols, fine)) break;
-      FittedSurface f = fit_exact_grid(path.string() + ": patch " + std::to_string(p.id), fine, rows, cols,
-                                       tolerance / 150.0);
-      if (!best || f.deviation < best->deviation) best = std::move(f);
-      if (best->deviation <= tolerance / 150.0) break;
+    FaceDomain best_domain;
+    for (const int margin : {0, 1, 2, 4, 8}) {
+      bool trimmed = false;
+      for (const auto& [more_rows, more_cols] : {std::pair{1, 1}, {2, 1}, {2, 2}, {4, 2}, {4, 4}, {8, 4}, {8, 8}}) {
+        int rows = (p.envelope.rows - 1) * more_rows + 1, cols = (p.envelope.cols - 1) * more_cols + 1;
+        Points fine;
+        FaceDomain domain;
+        if (!exact_omega_grid(p, rows, cols, fine, &domain, margin)) break;
+        trimmed = domain.t0 > 0.0 || domain.t1 < 1.0 || domain.s0 > 0.0 || domain.s1 < 1.0;
+        FittedSurface f = fit_exact_grid(path.string() + ": patch " + std::to_string(p.id), fine, rows, cols,
+                                         tolerance / 150.0, domain);
+        const bool better = !best || f.deviation < best->deviation;
+        if (better) best = std::move(f), best_domain = domain;
+        if (best->deviation <= tolerance / 150.0) break;
+      }
+      if (!trimmed || (best && best->deviation <= tolerance / 150.0)) break;
     }
     if (!best) continue;
     FittedSurface& f = *best;
-    deviation[k] = f.deviation;
+    written[k] = {f.deviation, best_domain};
     faces.push_back({face_name(p), std::move(f.surface)});
   }
   io::write_surfaces(path, faces);
-  return deviation;
+  return written;
 }
 
 void write_tools_step(const std::filesystem::path& path, const std::vector<Patch>& patches) {

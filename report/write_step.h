@@ -19,18 +19,28 @@ struct FittedSurface {
   double deviation = 0.0;  // max distance from the exact surface at grid points and cell midpoints, mm
 };
 
-// Fits a clamped cubic B-spline surface (least squares, tensor product, uniform knots) to the
-// even points of `fine`, a (2·rows − 1) × (2·cols − 1) grid of exact surface points
-// (row-major), and measures its deviation from every fine point (grid points, edge midpoints
-// and cell centres) at the same parameters: an upper bound on the distance between the two
-// surfaces there. Takes half as many poles as grid points when that meets `target`, else as
-// many. Throws io::Error(name: …).
-FittedSurface fit_exact_grid(const std::string& name, const Points& fine, int rows, int cols,
-                             double target);
+// The (t, s) rectangle of a patch that its face in patches.step covers: its parameter domain.
+struct FaceDomain {
+  double t0 = 0.0, t1 = 1.0, s0 = 0.0, s1 = 1.0;
+};
 
-// Ω of patch `p` sampled exactly (forward model) on a (2·rows − 1) × (2·cols − 1) grid over its
-// (t, s) ∈ [0, 1]², on the side its envelope grid took; false if some point has no envelope.
-bool exact_omega_grid(const Patch& p, int rows, int cols, Points& fine);
+// Fits a clamped cubic B-spline surface (least squares, tensor product, uniform knots over
+// `domain`) to the even points of `fine`, a (2·rows − 1) × (2·cols − 1) grid of exact surface
+// points (row-major) uniform over the domain, and measures its deviation from every fine
+// point (grid points, edge midpoints and cell centres) at the same parameters: an upper bound
+// on the distance between the two surfaces there. Takes half as many poles as grid points when
+// that meets `target`, else more. Throws io::Error(name: …).
+FittedSurface fit_exact_grid(const std::string& name, const Points& fine, int rows, int cols,
+                             double target, const FaceDomain& domain = {});
+
+// Ω of patch `p` sampled exactly (forward model), on the side its envelope grid took, on a
+// (2·rows − 1) × (2·cols − 1) grid uniform over (t, s) ∈ [0, 1]², cut down to the rows and
+// columns (of the rows × cols grid) where Ω exists everywhere: a motion that starts or ends
+// with a stall, or a cutter whose end has no contact circle, leaves no Ω there. `domain` and
+// the reduced rows and cols say what was kept. False when what lacks Ω is not at the
+// rectangle's edges or fewer than 4 × 4 grid points are left.
+// Where it cut, `margin` more rows or columns of the patch's envelope grid are left out.
+bool exact_omega_grid(const Patch& p, int& rows, int& cols, Points& fine, FaceDomain* domain, int margin = 0);
 
 // The meridian tools.step revolves: patches.json's tool.profile (101 points of
 // Cutter::meridian), or, where that folds back along the axis, the outline of the union of the
@@ -41,10 +51,16 @@ std::vector<Vec2> solid_profile(const Cutter& c);
 std::string face_name(const Patch& p);
 std::string tool_name(const Patch& p);
 
-// patches.step: one named B-spline face per patch (within 1% of the tolerance). Returns each
-// patch's measured deviation (NaN where Ω could not be sampled; that patch is left out).
-std::vector<double> write_patches_step(const std::filesystem::path& path, const std::vector<Patch>& patches,
-                                       double tolerance);
+// A patch's face as written: its measured deviation from the exact Ω (NaN where Ω could not
+// be sampled; that patch is left out) and the (t, s) domain it covers.
+struct WrittenFace {
+  double deviation = 0.0;
+  FaceDomain domain;
+};
+
+// patches.step: one named B-spline face per patch (within 1% of the tolerance).
+std::vector<WrittenFace> write_patches_step(const std::filesystem::path& path, const std::vector<Patch>& patches,
+                                            double tolerance);
 // tools.step: each cutter's meridian (solid_profile), closed by flat ends and
 // revolved about its axis, placed at t = 0 of its motion.
 void write_tools_step(const std::filesystem::path& path, const std::vector<Patch>& patches);

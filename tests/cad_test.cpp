@@ -69,6 +69,62 @@ TEST_F(CadIo, SplineSurfaceFitsAnyGridSize) {
   }
 }
 
+// A motion that starts at rest has no Ω at t = 0 (the sphere family does not move: no
+// characteristic circle). patches.step's face then stops short of it: its (t, s) domain starts
+// after the stall, and within it the face follows the exact Ω (the plane y = −5 of a cylinder
+// of radius 5 sweeping along x). A patch whose Ω exists everywhere keeps [0, 1]².
+TEST_F(CadIo, PatchFaceStopsWhereOmegaEnds) {
+  const auto make = [](bool stalled) {
+    Patch p;
+    p.id = 0;
+    p.motion.knots = clamped_uniform_knots(6);
+    p.motion.a.resize(6, 3);
+    p.motion.b.resize(6, 3);
+    for (int k = 0; k < 6; ++k) {
+      const double x = stalled && k == 0 ? 0.0 : 10.0 * (stalled ? k - 1 : k);
+      p.motion.a.row(k) << std::max(0.0, x), 0.0, 0.0;
+      p.motion.b.row(k) << std::max(0.0, x), 0.0, 20.0;
+    }
+    p.cutter = Cutter::constant(CutterKind::cylinder, 20.0, 5.0);
+    p.envelope.rows = 60, p.envelope.cols = 12;
+    p.envelope.V.resize(60 * 12, 3);
+    for (int i = 0; i < 60; ++i)
+      for (int j = 0; j < 12; ++j) {
+        const double t = i / 59.0, s = j / 11.0;
+        const Line l = p.motion.ruling(t);
+        const Vec3 rt = (1 - s) * p.motion.a_at(t, 1) + s * p.motion.b_at(t, 1);
+        const EnvelopePoint e = envelope_point(l.point(s), rt, l.b - l.a, 5.0, 0.0, -1);
+        p.envelope.V.row(i * 12 + j) = (e.valid ? e.point : l.point(s) + Vec3(0, -5, 0)).transpose();
+      }
+    return p;
+  };
+  for (const bool stalled : {false, true}) {
+    SCOPED_TRACE(stalled ? "starts at rest" : "moves throughout");
+    const Patch p = make(stalled);
+    const std::vector<report::WrittenFace> faces = report::write_patches_step(dir_ / "p.step", {p}, 0.01);
+    ASSERT_EQ(faces.size(), 1u);
+    ASSERT_TRUE(std::isfinite(faces[0].deviation));
+    EXPECT_LE(faces[0].deviation, 0.01 / 150.0);
+    const report::FaceDomain& d = faces[0].domain;
+    if (stalled) {
+      EXPECT_GT(d.t0, 0.0);
+      EXPECT_LT(d.t0, 0.1);
+    } else {
+      EXPECT_EQ(d.t0, 0.0);
+    }
+    EXPECT_EQ(d.t1, 1.0);
+    EXPECT_EQ(d.s0, 0.0);
+    EXPECT_EQ(d.s1, 1.0);
+    // The face as read back lies on the plane y = −5.
+    const io::CadPart part = io::CadPart::read((dir_ / "p.step").string());
+    ASSERT_EQ(part.faces().size(), 1u);
+    for (double u : {0.0, 0.3, 1.0})
+      for (double v : {0.0, 0.5, 1.0}) {
+        EXPECT_NEAR(part.face_point(1, u, v).y(), -5.0, 1e-6);
+      }
+  }
+}
+
 TEST_F(CadIo, FacesReadBackAsWrittenInStepAndIges) {
   const report::FittedSurface f = report::fit_exact_grid("cylinder", cylinder_grid(20, 6), 20, 6, 1e-7);
   for (const char* name : {"face.step", "face.igs"}) {
