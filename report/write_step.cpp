@@ -1,6 +1,7 @@
 #include "report/write_step.h"
 
 #include <cmath>
+#include <exception>
 #include <limits>
 #include <optional>
 
@@ -10,6 +11,7 @@
 
 #include "kernels/bspline.h"
 #include "kernels/envelope.h"
+#include "kernels/parallel.h"
 
 namespace flank::report {
 
@@ -43,14 +45,21 @@ std::vector<double> knots_over(int count, double lo, double hi) {
   return k;
 }
 
-io::SplineSurface least_squares(const std::string& name, const Points& grid, int rows, int cols, int nu, int nv,
-                                const FaceDomain& domain) {
+// A fitted surface before it becomes OCCT's: its poles (nu × nv, row-major, rows along u) on
+// clamped uniform knots, and its deviation from the exact points.
+struct PoleGrid {
+  Points poles;
+  int nu = 0, nv = 0;
+  double deviation = 0.0;
+};
+
+PoleGrid least_squares(const std::string& name, const Points& grid, int rows, int cols, int nu, int nv) {
   const Eigen::SparseMatrix<double> Bu = basis_matrix(rows, nu), Bv = basis_matrix(cols, nv);
   const Eigen::SparseMatrix<double> Nu = Bu.transpose() * Bu, Nv = Bv.transpose() * Bv;
   const Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> su(Nu), sv(Nv);
   if (su.info() != Eigen::Success || sv.info() != Eigen::Success)
     throw io::Error(name + ": the B-spline fit is singular");
-  Points poles(static_cast<Eigen::Index>(nu) * nv, 3);
+  PoleGrid g{Points(static_cast<Eigen::Index>(nu) * nv, 3), nu, nv, 0.0};
   for (int c = 0; c < 3; ++c) {
     Eigen::MatrixXd P(rows, cols);
     for (int i = 0; i < rows; ++i)
@@ -58,50 +67,71 @@ io::SplineSurface least_squares(const std::string& name, const Points& grid, int
     const Eigen::MatrixXd along_u = su.solve(Eigen::MatrixXd(Bu.transpose() * P));                  // nu × cols
     const Eigen::MatrixXd both = sv.solve(Eigen::MatrixXd(Bv.transpose() * along_u.transpose())).transpose();  // nu × nv
     for (int i = 0; i < nu; ++i)
-      for (int j = 0; j < nv; ++j) poles(static_cast<Eigen::Index>(i) * nv + j, c) = both(i, j);
+      for (int j = 0; j < nv; ++j) g.poles(static_cast<Eigen::Index>(i) * nv + j, c) = both(i, j);
   }
-  return io::SplineSurface::from_poles(name, poles, nu, nv, knots_over(nu, domain.t0, domain.t1),
-                                       knots_over(nv, domain.s0, domain.s1));
+  return g;
 }
 
-double deviation(const io::SplineSurface& surface, const Points& fine, int rows, int cols) {
+// The largest distance between the surface and `fine` at the fine grid's parameters. The
+// surface is evaluated as the tensor product it is, Bu · P · Bvᵀ per coordinate with the basis
+// tabulated once per fine row and column: the same values as OCCT's evaluation of the written
+// face (CadIo.FaceDeviationIsTheWrittenFaces checks), without locating each parameter among
+// the knots again, which made measuring 80% of the fit on large faces.
+double deviation(const PoleGrid& g, const Points& fine, int rows, int cols) {
   const int fine_rows = 2 * rows - 1, fine_cols = 2 * cols - 1;
-  double worst = 0.0;
-  for (int i = 0; i < fine_rows; ++i)
-    for (int j = 0; j < fine_cols; ++j) {
-      const Vec3 on = surface.point(i / (2.0 * (rows - 1)), j / (2.0 * (cols - 1)));
-      const Vec3 exact = fine.row(static_cast<Eigen::Index>(i) * fine_cols + j).transpose();
-      worst = std::max(worst, (on - exact).norm());
-    }
-  return worst;
+  const Eigen::SparseMatrix<double> Bu = basis_matrix(fine_rows, g.nu), Bv = basis_matrix(fine_cols, g.nv);
+  Eigen::MatrixXd squared = Eigen::MatrixXd::Zero(fine_rows, fine_cols);
+  for (int c = 0; c < 3; ++c) {
+    Eigen::MatrixXd P(g.nu, g.nv);
+    for (int i = 0; i < g.nu; ++i)
+      for (int j = 0; j < g.nv; ++j) P(i, j) = g.poles(static_cast<Eigen::Index>(i) * g.nv + j, c);
+    const Eigen::MatrixXd on_u = Bu * P;                                        // fine_rows × nv
+    const Eigen::MatrixXd on = (Bv * on_u.transpose()).transpose();             // fine_rows × fine_cols
+    for (int i = 0; i < fine_rows; ++i)
+      for (int j = 0; j < fine_cols; ++j) {
+        const double e = on(i, j) - fine(static_cast<Eigen::Index>(i) * fine_cols + j, c);
+        squared(i, j) += e * e;
+      }
+  }
+  return std::sqrt(squared.maxCoeff());
+}
+
+// Half as many poles as grid points first (a lighter file), then more; the first that meets
+// `target` at every fine point, else the more accurate. The second has one pole per point (it
+// interpolates) only up to 24 points: at uniform parameters the collocation matrix of a cubic
+// with uniform knots and as many poles as points has a condition number that grows about
+// 1.17 times a point (66 at 24 points, 1e13 at 200, exactly singular in double at 324, which
+// a Rotor 67 patch hit); beyond, four fifths as many poles as points, whose condition stays
+// under 9 for every count up to 420 tried (half: under 5).
+PoleGrid fit_poles(const std::string& name, const Points& fine, int rows, int cols, double target) {
+  const int fine_cols = 2 * cols - 1;
+  Points grid(static_cast<Eigen::Index>(rows) * cols, 3);
+  for (int i = 0; i < rows; ++i)
+    for (int j = 0; j < cols; ++j)
+      grid.row(static_cast<Eigen::Index>(i) * cols + j) = fine.row(static_cast<Eigen::Index>(2 * i) * fine_cols + 2 * j);
+  const auto poles = [](int points, bool more) {
+    const int half = std::max(4, (points + 1) / 2);
+    return more ? std::min(points, std::max({half, 24, static_cast<int>(std::ceil(0.8 * points))})) : half;
+  };
+  PoleGrid best = least_squares(name, grid, rows, cols, poles(rows, false), poles(cols, false));
+  best.deviation = deviation(best, fine, rows, cols);
+  if (best.deviation <= target) return best;
+  PoleGrid full = least_squares(name, grid, rows, cols, poles(rows, true), poles(cols, true));
+  full.deviation = deviation(full, fine, rows, cols);
+  return full.deviation < best.deviation ? full : best;
+}
+
+FittedSurface to_surface(const std::string& name, const PoleGrid& g, const FaceDomain& domain) {
+  return {io::SplineSurface::from_poles(name, g.poles, g.nu, g.nv, knots_over(g.nu, domain.t0, domain.t1),
+                                        knots_over(g.nv, domain.s0, domain.s1)),
+          g.deviation};
 }
 
 }  // namespace
 
 FittedSurface fit_exact_grid(const std::string& name, const Points& fine, int rows, int cols, double target,
                              const FaceDomain& domain) {
-  const int fine_cols = 2 * cols - 1;
-  Points grid(static_cast<Eigen::Index>(rows) * cols, 3);
-  for (int i = 0; i < rows; ++i)
-    for (int j = 0; j < cols; ++j)
-      grid.row(static_cast<Eigen::Index>(i) * cols + j) = fine.row(static_cast<Eigen::Index>(2 * i) * fine_cols + 2 * j);
-  // Half as many poles as grid points first (a lighter file), then more; the first that meets
-  // `target` at every fine point, else the more accurate. The second has one pole per point (it
-  // interpolates) only up to 24 points: at uniform parameters the collocation matrix of a cubic
-  // with uniform knots and as many poles as points has a condition number that grows about
-  // 1.17 times a point (66 at 24 points, 1e13 at 200, exactly singular in double at 324, which
-  // a Rotor 67 patch hit); beyond, four fifths as many poles as points, whose condition stays
-  // under 9 for every count up to 420 tried (half: under 5).
-  const auto poles = [](int points, bool more) {
-    const int half = std::max(4, (points + 1) / 2);
-    return more ? std::min(points, std::max({half, 24, static_cast<int>(std::ceil(0.8 * points))})) : half;
-  };
-  FittedSurface best{least_squares(name, grid, rows, cols, poles(rows, false), poles(cols, false), domain), 0.0};
-  best.deviation = deviation(best.surface, fine, rows, cols);
-  if (best.deviation <= target) return best;
-  FittedSurface full{least_squares(name, grid, rows, cols, poles(rows, true), poles(cols, true), domain), 0.0};
-  full.deviation = deviation(full.surface, fine, rows, cols);
-  return full.deviation < best.deviation ? full : best;
+  return to_surface(name, fit_poles(name, fine, rows, cols, target), domain);
 }
 
 bool exact_omega_grid(const Patch& p, int& rows, int& cols, Points& fine, FaceDomain* domain, int margin) {
@@ -215,37 +245,53 @@ std::string tool_name(const Patch& p) { return face_name(p) + "-tool"; }
 
 std::vector<WrittenFace> write_patches_step(const std::filesystem::path& path, const std::vector<Patch>& patches,
                                             double tolerance) {
+  // Each patch's face is fitted on its own, concurrently (without OCCT: poles and the measured
+  // deviation only); the faces then go to OCCT in patch order. An error of a patch's fit is
+  // rethrown after all have run, the first in patch order, whatever the thread count.
+  struct Fitted {
+    std::optional<PoleGrid> best;
+    FaceDomain domain;
+    std::exception_ptr error;
+  };
+  std::vector<Fitted> fitted(patches.size());
+  const std::string file = path.string();
+  parallel_invoke_each(patches.size(), [&](std::size_t k) {
+    const Patch& p = patches[k];
+    Fitted& out = fitted[k];
+    try {
+      // Ω's grid in the evaluation's (t, s) samples, then up to eight times as many rows
+      // (along the motion, where a fitted motion's knots leave kinks) and columns, until the
+      // face is within 1/150 of the tolerance (a margin under the 1% promised); else the
+      // closest. Where Ω ends inside the grid, a face that misses the target is tried again
+      // kept 1, 2, 4, 8 envelope rows (columns) farther from that end.
+      for (const int margin : {0, 1, 2, 4, 8}) {
+        bool trimmed = false;
+        for (const auto& [more_rows, more_cols] : {std::pair{1, 1}, {2, 1}, {2, 2}, {4, 2}, {4, 4}, {8, 4}, {8, 8}}) {
+          int rows = (p.envelope.rows - 1) * more_rows + 1, cols = (p.envelope.cols - 1) * more_cols + 1;
+          Points fine;
+          FaceDomain domain;
+          if (!exact_omega_grid(p, rows, cols, fine, &domain, margin)) break;
+          trimmed = domain.t0 > 0.0 || domain.t1 < 1.0 || domain.s0 > 0.0 || domain.s1 < 1.0;
+          PoleGrid g = fit_poles(file + ": patch " + std::to_string(p.id), fine, rows, cols, tolerance / 150.0);
+          if (!out.best || g.deviation < out.best->deviation) out.best = std::move(g), out.domain = domain;
+          if (out.best->deviation <= tolerance / 150.0) break;
+        }
+        if (!trimmed || (out.best && out.best->deviation <= tolerance / 150.0)) break;
+      }
+    } catch (...) {
+      out.error = std::current_exception();
+    }
+  });
+  for (const Fitted& f : fitted)
+    if (f.error) std::rethrow_exception(f.error);
   std::vector<WrittenFace> written(patches.size(), {std::numeric_limits<double>::quiet_NaN(), {}});
   std::vector<io::NamedSurface> faces;
   for (std::size_t k = 0; k < patches.size(); ++k) {
-    const Patch& p = patches[k];
-    // Ω's grid in the evaluation's (t, s) samples, then up to eight times as many rows (along
-    // the motion, where a fitted motion's knots leave kinks) and columns, until the face is
-    // within 1/150 of the tolerance (a margin under the 1% promised); else the closest.
-    // Where Ω ends inside the grid, a face that misses the target is tried again kept 1, 2, 4, 8
-    // envelope rows (columns) farther from that end.
-    std::optional<FittedSurface> best;
-    FaceDomain best_domain;
-    for (const int margin : {0, 1, 2, 4, 8}) {
-      bool trimmed = false;
-      for (const auto& [more_rows, more_cols] : {std::pair{1, 1}, {2, 1}, {2, 2}, {4, 2}, {4, 4}, {8, 4}, {8, 8}}) {
-        int rows = (p.envelope.rows - 1) * more_rows + 1, cols = (p.envelope.cols - 1) * more_cols + 1;
-        Points fine;
-        FaceDomain domain;
-        if (!exact_omega_grid(p, rows, cols, fine, &domain, margin)) break;
-        trimmed = domain.t0 > 0.0 || domain.t1 < 1.0 || domain.s0 > 0.0 || domain.s1 < 1.0;
-        FittedSurface f = fit_exact_grid(path.string() + ": patch " + std::to_string(p.id), fine, rows, cols,
-                                         tolerance / 150.0, domain);
-        const bool better = !best || f.deviation < best->deviation;
-        if (better) best = std::move(f), best_domain = domain;
-        if (best->deviation <= tolerance / 150.0) break;
-      }
-      if (!trimmed || (best && best->deviation <= tolerance / 150.0)) break;
-    }
-    if (!best) continue;
-    FittedSurface& f = *best;
-    written[k] = {f.deviation, best_domain};
-    faces.push_back({face_name(p), std::move(f.surface)});
+    if (!fitted[k].best) continue;
+    const std::string name = face_name(patches[k]);
+    written[k] = {fitted[k].best->deviation, fitted[k].domain};
+    faces.push_back({name, to_surface(file + ": patch " + std::to_string(patches[k].id), *fitted[k].best,
+                                      fitted[k].domain).surface});
   }
   io::write_surfaces(path, faces);
   return written;

@@ -11,12 +11,14 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
+#include <tuple>
 #include <vector>
 
 #include "io/read_mesh.h"
 #include "kernels/bspline.h"
 #include "kernels/cutter.h"
 #include "kernels/envelope.h"
+#include "kernels/parallel.h"
 #include "report/write_step.h"
 #include "solver/motion.h"
 #include "tests/cli_run.h"
@@ -69,38 +71,63 @@ TEST_F(CadIo, SplineSurfaceFitsAnyGridSize) {
   }
 }
 
+// A cylinder of radius 5 sweeping 40 mm along x (from rest when `stalled`), `shift` mm up z:
+// Ω is the plane y = −5.
+Patch sweeping_cylinder(bool stalled, double shift = 0.0) {
+  Patch p;
+  p.id = 0;
+  p.motion.knots = clamped_uniform_knots(6);
+  p.motion.a.resize(6, 3);
+  p.motion.b.resize(6, 3);
+  for (int k = 0; k < 6; ++k) {
+    const double x = stalled && k == 0 ? 0.0 : 10.0 * (stalled ? k - 1 : k);
+    p.motion.a.row(k) << std::max(0.0, x), 0.0, shift;
+    p.motion.b.row(k) << std::max(0.0, x), 0.0, shift + 20.0;
+  }
+  p.cutter = Cutter::constant(CutterKind::cylinder, 20.0, 5.0);
+  p.envelope.rows = 60, p.envelope.cols = 12;
+  p.envelope.V.resize(60 * 12, 3);
+  for (int i = 0; i < 60; ++i)
+    for (int j = 0; j < 12; ++j) {
+      const double t = i / 59.0, s = j / 11.0;
+      const Line l = p.motion.ruling(t);
+      const Vec3 rt = (1 - s) * p.motion.a_at(t, 1) + s * p.motion.b_at(t, 1);
+      const EnvelopePoint e = envelope_point(l.point(s), rt, l.b - l.a, 5.0, 0.0, -1);
+      p.envelope.V.row(i * 12 + j) = (e.valid ? e.point : l.point(s) + Vec3(0, -5, 0)).transpose();
+    }
+  return p;
+}
+
+// The deviation a face reports is measured on the tensor product of its poles, not through
+// OCCT: it must be what OCCT's own evaluation of the written face gives at the same points,
+// on a trimmed (t, s) domain too, for a coarse fit (large deviation) and a fine one.
+TEST_F(CadIo, FaceDeviationIsTheWrittenFaces) {
+  for (const auto& [rows, cols, target] : {std::tuple{5, 4, 1.0}, std::tuple{30, 7, 1e-14}}) {
+    for (const report::FaceDomain& domain : {report::FaceDomain{}, report::FaceDomain{0.25, 0.75, 0.1, 1.0}}) {
+      SCOPED_TRACE(testing::Message() << rows << " rows, domain t0 " << domain.t0);
+      const Points fine = cylinder_grid(rows, cols);
+      const report::FittedSurface f = report::fit_exact_grid("cylinder", fine, rows, cols, target, domain);
+      const int fr = 2 * rows - 1, fc = 2 * cols - 1;
+      double worst = 0.0;
+      for (int i = 0; i < fr; ++i)
+        for (int j = 0; j < fc; ++j)
+          worst = std::max(worst, (f.surface.point(i / (fr - 1.0), j / (fc - 1.0)) -
+                                   fine.row(static_cast<Eigen::Index>(i) * fc + j).transpose())
+                                      .norm());
+      EXPECT_GT(worst, 0.0);
+      EXPECT_NEAR(f.deviation, worst, 1e-12 + 1e-9 * worst);
+    }
+  }
+}
+
 // A motion that starts at rest has no Ω at t = 0 (the sphere family does not move: no
 // characteristic circle). patches.step's face then stops short of it: its (t, s) domain starts
 // after the stall, and within it the face follows the exact Ω (the plane y = −5 of a cylinder
 // of radius 5 sweeping along x). A patch whose Ω exists everywhere keeps [0, 1]².
 TEST_F(CadIo, PatchFaceStopsWhereOmegaEnds) {
-  const auto make = [](bool stalled) {
-    Patch p;
-    p.id = 0;
-    p.motion.knots = clamped_uniform_knots(6);
-    p.motion.a.resize(6, 3);
-    p.motion.b.resize(6, 3);
-    for (int k = 0; k < 6; ++k) {
-      const double x = stalled && k == 0 ? 0.0 : 10.0 * (stalled ? k - 1 : k);
-      p.motion.a.row(k) << std::max(0.0, x), 0.0, 0.0;
-      p.motion.b.row(k) << std::max(0.0, x), 0.0, 20.0;
-    }
-    p.cutter = Cutter::constant(CutterKind::cylinder, 20.0, 5.0);
-    p.envelope.rows = 60, p.envelope.cols = 12;
-    p.envelope.V.resize(60 * 12, 3);
-    for (int i = 0; i < 60; ++i)
-      for (int j = 0; j < 12; ++j) {
-        const double t = i / 59.0, s = j / 11.0;
-        const Line l = p.motion.ruling(t);
-        const Vec3 rt = (1 - s) * p.motion.a_at(t, 1) + s * p.motion.b_at(t, 1);
-        const EnvelopePoint e = envelope_point(l.point(s), rt, l.b - l.a, 5.0, 0.0, -1);
-        p.envelope.V.row(i * 12 + j) = (e.valid ? e.point : l.point(s) + Vec3(0, -5, 0)).transpose();
-      }
-    return p;
-  };
   for (const bool stalled : {false, true}) {
     SCOPED_TRACE(stalled ? "starts at rest" : "moves throughout");
-    const Patch p = make(stalled);
+    const Patch p = sweeping_cylinder(stalled);
     const std::vector<report::WrittenFace> faces = report::write_patches_step(dir_ / "p.step", {p}, 0.01);
     ASSERT_EQ(faces.size(), 1u);
     ASSERT_TRUE(std::isfinite(faces[0].deviation));
@@ -123,6 +150,39 @@ TEST_F(CadIo, PatchFaceStopsWhereOmegaEnds) {
         EXPECT_NEAR(part.face_point(1, u, v).y(), -5.0, 1e-6);
       }
   }
+}
+
+// patches.step's faces are fitted concurrently: the file, the deviations and the domains are
+// those of one thread. A fixture of its own, so that the TSan pass (which leaves out CadIo.*)
+// runs it.
+class PatchFaces : public Cli {};
+
+TEST_F(PatchFaces, SameFacesWhateverTheThreadCount) {
+  std::vector<Patch> patches;
+  for (int k = 0; k < 6; ++k) {
+    patches.push_back(sweeping_cylinder(k % 2 == 1, 25.0 * k));
+    patches.back().id = k;
+  }
+  std::vector<std::vector<report::WrittenFace>> faces;
+  std::vector<std::string> bytes;
+  for (const int threads : {1, 2}) {
+    ThreadLimit limit(threads);
+    const fs::path dir = dir_ / std::to_string(threads);
+    fs::create_directories(dir);
+    faces.push_back(report::write_patches_step(dir / "patches.step", patches, 0.01));
+    bytes.push_back(slurp(dir / "patches.step"));
+  }
+  ASSERT_EQ(faces[0].size(), patches.size());
+  ASSERT_EQ(faces[1].size(), patches.size());
+  for (std::size_t k = 0; k < patches.size(); ++k) {
+    SCOPED_TRACE(k);
+    ASSERT_TRUE(std::isfinite(faces[0][k].deviation));
+    EXPECT_EQ(faces[0][k].deviation, faces[1][k].deviation);
+    EXPECT_EQ(faces[0][k].domain.t0, faces[1][k].domain.t0);
+    EXPECT_EQ(faces[0][k].domain.t1, faces[1][k].domain.t1);
+  }
+  EXPECT_GT(faces[1][1].domain.t0, 0.0);  // the stalled ones were trimmed
+  EXPECT_EQ(bytes[0], bytes[1]);
 }
 
 TEST_F(CadIo, FacesReadBackAsWrittenInStepAndIges) {
