@@ -109,6 +109,17 @@ class ScalingReportTest(unittest.TestCase):
         return subprocess.run([sys.executable, SCRIPT, *args], capture_output=True, text=True,
                               timeout=300)
 
+    def report(self, run, out, *extra):
+        """Runs `report` into `out`; checks it succeeded and drew its four plots. (result, report.md)"""
+        r = self.run_cli("report", "--json", run, "-o", out, *extra)
+        self.assertEqual(r.returncode, 0, r.stderr)
+        for name in ("stages.png", "speedup.png", "scoring_vs_queries.png", "gn_share.png"):
+            path = os.path.join(out, name)
+            self.assertTrue(os.path.isfile(path), name)
+            self.assertGreater(os.path.getsize(path), 1000, name)
+        with open(os.path.join(out, "report.md"), encoding="utf-8") as f:
+            return r, f.read()
+
     def check(self, run, base, *extra):
         return self.run_cli("check", "--json", run, "--baseline", base, *extra)
 
@@ -388,16 +399,8 @@ class ScalingReportTest(unittest.TestCase):
         del slower["Ladder/fit/blade/tri_k:16/threads:2"]
         base = self.write("base.json", gb_json(slower))
         out = os.path.join(self.dir, "report")
-        r = self.run_cli("report", "--json", run, "-o", out, "--baseline", base,
-                         "--title", "Test ladder")
-        self.assertEqual(r.returncode, 0, r.stderr)
+        r, md = self.report(run, out, "--baseline", base, "--title", "Test ladder")
         self.assertEqual(r.stdout.strip(), os.path.join(out, "report.md"))
-        for name in ("stages.png", "speedup.png", "scoring_vs_queries.png", "gn_share.png"):
-            path = os.path.join(out, name)
-            self.assertTrue(os.path.isfile(path), name)
-            self.assertGreater(os.path.getsize(path), 1000, name)
-        with open(os.path.join(out, "report.md"), encoding="utf-8") as f:
-            md = f.read()
         self.assertIn("# Test ladder", md)
         self.assertIn("![stages](stages.png)", md)
         self.assertIn("Ratios against limits (same run)", md)
@@ -426,13 +429,7 @@ class ScalingReportTest(unittest.TestCase):
         self.assertEqual(sr.panel_grid(6), (2, 3))  # at most 3 panels to a row
         self.assertEqual(sr.panel_grid(2), (1, 2))
 
-        out = os.path.join(self.dir, "report")
-        r = self.run_cli("report", "--json", run, "-o", out)
-        self.assertEqual(r.returncode, 0, r.stderr)
-        for name in ("stages.png", "speedup.png", "scoring_vs_queries.png", "gn_share.png"):
-            self.assertGreater(os.path.getsize(os.path.join(out, name)), 1000, name)
-        with open(os.path.join(out, "report.md"), encoding="utf-8") as f:
-            md = f.read()
+        _, md = self.report(run, os.path.join(self.dir, "report"))
         # The decompose rows say the tolerance and cutter kinds each part ran at.
         self.assertIn("| rotor_upper | 96 | 2 | 1e-4 | 4 |", md)
         self.assertIn("| hecc_a | 24 | 1 | 1e-4 | 4 |", md)
