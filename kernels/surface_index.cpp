@@ -13,6 +13,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "kernels/cell_grid.h"
 #include "kernels/lanes.h"
 #include "kernels/obb_tree.h"
 #include "kernels/parallel.h"
@@ -267,6 +268,9 @@ struct SurfaceIndex::Impl {
   std::vector<Corners> leaf_corners;        // kBoxTree: per position of the leaf order, contiguous
   std::vector<std::int32_t> face_position;  // kBoxTree: face → position (tree.order() inverts it)
   std::vector<LeafPack> packs;              // kBoxTree: per leaf of tree.leaves()
+  double reach = kInf;                      // kCells: the farthest a query may look
+  CellGrid cells;                           // kCells: over the faces' boxes grown by reach
+  std::vector<Corners> face_corners;        // kCells: per face
   std::vector<std::uint8_t> edge_boundary;  // per face, bit k: edge (k, k+1 mod 3) is a boundary
   std::vector<std::uint8_t> vertex_boundary;
   // For queries over a subset of the faces: the faces' edge slots (3 f + k) grouped by edge
@@ -564,6 +568,13 @@ ClosestPoint SurfaceIndex::Impl::query_once(const Vec3& p, int hint_face, double
     RTCPointQueryContext context;
     rtcInitPointQueryContext(&context);
     rtcPointQuery(scene, &q, &context, &point_query_callback, &state);
+  } else if (engine == QueryEngine::kCells) {
+    // Every face within max_distance ≤ reach of p is listed in p's cell; no other can answer.
+    for (const std::int32_t f : cells.items_at(p)) {
+      if (mask && !mask[f]) continue;
+      const Corners& c = face_corners[static_cast<std::size_t>(f)];
+      state.exact(f, c.a, c.b, c.c);
+    }
   } else {
     // The hint's exact distance bounds the search from the start.
     if (hinted) {
@@ -604,10 +615,19 @@ ClosestPoint SurfaceIndex::Impl::query_once(const Vec3& p, int hint_face, double
   return out;
 }
 
-SurfaceIndex::SurfaceIndex(const Mesh& mesh, QueryEngine engine)
+SurfaceIndex::SurfaceIndex(const Mesh& mesh, QueryEngine engine) : SurfaceIndex(mesh, engine, kInf) {}
+
+SurfaceIndex SurfaceIndex::within_reach(const Mesh& mesh, double reach) {
+  if (!(reach > 0.0) || !std::isfinite(reach))
+    throw std::invalid_argument("SurfaceIndex::within_reach: the reach must be positive and finite");
+  return SurfaceIndex(mesh, QueryEngine::kCells, reach);
+}
+
+SurfaceIndex::SurfaceIndex(const Mesh& mesh, QueryEngine engine, double reach)
     : impl_(std::make_unique<Impl>()) {
   Impl& m = *impl_;
   m.engine = engine;
+  m.reach = reach;
   m.mesh = mesh;
   m.normals = face_normals(mesh);
   const BoundingBox box = bounding_box(mesh);
@@ -642,6 +662,18 @@ SurfaceIndex::SurfaceIndex(const Mesh& mesh, QueryEngine engine)
                                           std::abs(t.normal.dot(t.c - t.centre))}) + m.on_surface;
     }
     m.build_scene();
+  } else if (m.engine == QueryEngine::kCells) {
+    // Each face's box grown by the reach (a little wider, and by the coordinates' rounding):
+    // a point within the reach of a face lies in the grown box.
+    const double grow = reach * (1.0 + 1e-9) + 1e-12 * scale;
+    std::vector<Vec3> lo(static_cast<std::size_t>(nf)), hi(static_cast<std::size_t>(nf));
+    for (std::size_t f = 0; f < corners.size(); ++f) {
+      const Corners& c = corners[f];
+      lo[f] = (c.a.cwiseMin(c.b).cwiseMin(c.c).array() - grow).matrix();
+      hi[f] = (c.a.cwiseMax(c.b).cwiseMax(c.c).array() + grow).matrix();
+    }
+    m.cells = CellGrid(lo, hi);
+    m.face_corners = std::move(corners);
   } else {
     m.build_tree(corners, 1e-12 * scale);
   }
@@ -745,7 +777,15 @@ bool SurfaceIndex::is_boundary_vertex(int v) const {
   return impl_->vertex_boundary[static_cast<std::size_t>(v)] != 0;
 }
 
+namespace {
+void require_unbounded(QueryEngine engine) {
+  if (engine == QueryEngine::kCells)
+    throw std::logic_error("SurfaceIndex: an index made by within_reach answers bounded queries only");
+}
+}  // namespace
+
 ClosestPoint SurfaceIndex::closest_point(const Vec3& p, int hint_face) const {
+  require_unbounded(impl_->engine);
   return impl_->query(p, hint_face);
 }
 
@@ -771,6 +811,7 @@ std::vector<ClosestPoint> SurfaceIndex::Impl::batch(PointsRef queries, std::span
 
 std::vector<ClosestPoint> SurfaceIndex::closest_points(PointsRef queries,
                                                        std::span<const int> hints) const {
+  require_unbounded(impl_->engine);
   return impl_->batch(queries, hints, kInf, nullptr);
 }
 
@@ -778,6 +819,8 @@ std::vector<ClosestPoint> SurfaceIndex::closest_points_within(PointsRef queries,
                                                               std::span<const char> face_mask) const {
   assert(max_distance >= 0.0);
   assert(face_mask.empty() || face_mask.size() == static_cast<std::size_t>(impl_->mesh.face_count()));
+  if (max_distance > impl_->reach)
+    throw std::logic_error("SurfaceIndex: a bounded query looks farther than the index's reach");
   return impl_->batch(queries, {}, max_distance, face_mask.empty() ? nullptr : face_mask.data());
 }
 
@@ -785,6 +828,7 @@ void SurfaceIndex::closest_points_serial(PointsRef queries, std::span<const int>
                                          std::span<ClosestPoint> out) const {
   assert(hints.empty() || hints.size() == static_cast<std::size_t>(queries.rows()));
   assert(out.size() == static_cast<std::size_t>(queries.rows()));
+  require_unbounded(impl_->engine);
   const std::size_t count = std::min(out.size(), static_cast<std::size_t>(queries.rows()));
   const Impl& m = *impl_;
   int previous = -1;

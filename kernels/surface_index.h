@@ -33,6 +33,12 @@ enum class QueryEngine {
   // Embree's BVH of axis-aligned boxes with rtcPointQuery: the reference, kept for the
   // tests and benchmarks that compare with it.
   kEmbree,
+  // A uniform grid of cells, each listing the faces within a fixed reach of it
+  // (kernels/cell_grid.h): built in linear time, for an index that lives for a few bounded
+  // queries (Ω's in evaluate_patch, where building the box tree cost more than all its
+  // queries). Made by SurfaceIndex::within_reach; answers closest_points_within up to that
+  // reach only.
+  kCells,
 };
 
 class SurfaceIndex {
@@ -40,6 +46,10 @@ class SurfaceIndex {
   // Builds the search structure over a copy of `mesh` (which must be valid: see
   // io::read_mesh).
   explicit SurfaceIndex(const Mesh& mesh, QueryEngine engine = QueryEngine::kBoxTree);
+  // An index for closest_points_within with max_distance ≤ reach (> 0, finite) only
+  // (QueryEngine::kCells), with the same answers as the box tree's; any other query throws
+  // std::logic_error.
+  static SurfaceIndex within_reach(const Mesh& mesh, double reach);
   ~SurfaceIndex();
   SurfaceIndex(SurfaceIndex&&) noexcept;
   SurfaceIndex& operator=(SurfaceIndex&&) noexcept;
@@ -74,6 +84,7 @@ class SurfaceIndex {
                              std::span<ClosestPoint> out) const;
 
  private:
+  SurfaceIndex(const Mesh& mesh, QueryEngine engine, double reach);
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };

@@ -264,13 +264,15 @@ constexpr double kUnderCosine = 0.8660254037844386;
 // Ω over a grid as one mesh (two triangles per cell whose corners all have an envelope point)
 // and, made on first use, its index. The error seen from Φ's vertices and the coverage each
 // look at a part of it (over Φ; within the band of Φ) through a face mask: one index instead
-// of one per part, with the answers of each part's own index.
+// of one per part, with the answers of each part's own index. Both look no farther than
+// `reach` (a few tolerances), so the index is a grid of cells (QueryEngine::kCells): a box
+// tree took longer to build than all its queries took to answer.
 class OmegaSurface {
  public:
-  explicit OmegaSurface(const ErrorGrid& grid) : mesh_(envelope_mesh(grid, nullptr)) {}
+  OmegaSurface(const ErrorGrid& grid, double reach) : mesh_(envelope_mesh(grid, nullptr)), reach_(reach) {}
   const Mesh& mesh() const { return mesh_; }
   const SurfaceIndex& index() {
-    if (!index_) index_ = std::make_unique<SurfaceIndex>(mesh_);
+    if (!index_) index_ = std::make_unique<SurfaceIndex>(SurfaceIndex::within_reach(mesh_, reach_));
     return *index_;
   }
   // The faces whose three corners `keep` holds: the faces envelope_mesh(grid, &keep) has.
@@ -285,6 +287,7 @@ class OmegaSurface {
 
  private:
   Mesh mesh_;
+  double reach_;
   std::unique_ptr<SurfaceIndex> index_;
 };
 
@@ -351,7 +354,7 @@ Patch evaluate_patch(const SurfaceIndex& index, const Motion& motion, const Cutt
   std::optional<OmegaSurface> omega_grid, omega_reported;
   const auto omega_of = [&](const ErrorGrid& g) -> OmegaSurface& {
     std::optional<OmegaSurface>& o = &g == &grid ? omega_grid : omega_reported;
-    if (!o) o.emplace(g);
+    if (!o) o.emplace(g, (options.vertex_side ? std::max(options.vertex_band, 1.0) : 1.0) * options.tolerance);
     return *o;
   };
   if (options.vertex_side) {

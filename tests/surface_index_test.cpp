@@ -7,6 +7,9 @@
 #include <limits>
 #include <map>
 #include <random>
+#include <span>
+#include <stdexcept>
+#include <string>
 #include <utility>
 #include <vector>
 
@@ -446,6 +449,66 @@ TEST(SurfaceIndex, MaskedQueriesAnswerAsTheSubsetsOwnIndex) {
       }
     }
   }
+}
+
+// The grid of cells answers a bounded query as the box tree does, bit for bit: at the reach
+// it was built for (a face at exactly that distance included), nearer, with and without a face
+// mask, on surfaces, soups, slivers far from the origin and exact ties.
+TEST(SurfaceIndex, CellsAnswerBoundedQueriesAsTheBoxTree) {
+  Mesh far_slivers = triangle_soup(300, 83);
+  for (Eigen::Index v = 0; v < far_slivers.V.rows(); v += 3)  // squash every third corner onto its edge
+    far_slivers.V.row(v + 2) = 0.5 * (far_slivers.V.row(v) + far_slivers.V.row(v + 1)) +
+                               1e-6 * (far_slivers.V.row(v + 2) - far_slivers.V.row(v));
+  far_slivers.V.rowwise() += Eigen::RowVector3d(3e4, -1e4, 2e4);
+  const Mesh ties = make_grid(24, 24, 12.0, 12.0, [](double, double) { return 0.0; });
+  const std::vector<std::pair<const char*, Mesh>> meshes{
+      {"perturbed grid", perturbed_grid(89)}, {"soup", triangle_soup(500, 97)}, {"far slivers", far_slivers}, {"flat grid", ties}};
+  for (const auto& [name, m] : meshes) {
+    SCOPED_TRACE(name);
+    Points Q = make_queries(m, 300 * kQueryScale, 101);
+    if (std::string(name) == "flat grid")  // over vertices, edges and diagonals: exact ties
+      for (Eigen::Index i = 0; i < Q.rows(); ++i)
+        Q.row(i) << 0.5 * static_cast<double>(i % 23 + 1) + 0.25 * static_cast<double>(i % 3),
+            0.5 * static_cast<double>(i / 23 % 23 + 1) + 0.25 * static_cast<double>(i % 2), 0.1 * static_cast<double>(i % 5);
+    const SurfaceIndex tree(m);
+    std::vector<double> d;
+    for (const ClosestPoint& c : tree.closest_points(Q))
+      if (c.distance > 0.0) d.push_back(c.distance);
+    std::sort(d.begin(), d.end());
+    std::vector<char> mask(static_cast<std::size_t>(m.face_count()));
+    for (std::size_t f = 0; f < mask.size(); ++f) mask[f] = (f * 7919) % 5 != 0;
+    for (const double reach : {d[d.size() / 8], d[d.size() / 2], 2.0 * d.back()}) {
+      const SurfaceIndex cells = SurfaceIndex::within_reach(m, reach);
+      EXPECT_EQ(cells.engine(), QueryEngine::kCells);
+      int found = 0;
+      for (const double bound : {reach, 0.5 * reach, 0.0})
+        for (const bool masked : {false, true}) {
+          const std::span<const char> fm = masked ? std::span<const char>(mask) : std::span<const char>{};
+          const std::vector<ClosestPoint> a = cells.closest_points_within(Q, bound, fm);
+          const std::vector<ClosestPoint> b = tree.closest_points_within(Q, bound, fm);
+          for (std::size_t i = 0; i < a.size(); ++i) {
+            SCOPED_TRACE(i);
+            expect_same(a[i], b[i]);
+            found += a[i].face >= 0;
+          }
+        }
+      EXPECT_GT(found, 0);
+    }
+  }
+}
+
+TEST(SurfaceIndex, CellsRefuseQueriesBeyondTheirReach) {
+  const Mesh m = perturbed_grid(103);
+  const SurfaceIndex cells = SurfaceIndex::within_reach(m, 0.1);
+  const Points Q = make_queries(m, 8, 107);
+  EXPECT_THROW(cells.closest_point(Vec3::Zero()), std::logic_error);
+  EXPECT_THROW(cells.closest_points(Q), std::logic_error);
+  std::vector<ClosestPoint> out(8);
+  EXPECT_THROW(cells.closest_points_serial(Q, {}, out), std::logic_error);
+  EXPECT_THROW(cells.closest_points_within(Q, 0.2), std::logic_error);
+  EXPECT_NO_THROW(cells.closest_points_within(Q, 0.1));
+  EXPECT_THROW(SurfaceIndex::within_reach(m, 0.0), std::invalid_argument);
+  EXPECT_THROW(SurfaceIndex::within_reach(m, std::numeric_limits<double>::infinity()), std::invalid_argument);
 }
 
 TEST(SurfaceIndex, BatchedParallelEqualsSerial) {

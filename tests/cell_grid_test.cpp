@@ -1,0 +1,62 @@
+#include "kernels/cell_grid.h"
+
+#include <gtest/gtest.h>
+
+#include <algorithm>
+#include <random>
+#include <vector>
+
+namespace flank {
+namespace {
+
+// Every box that holds a point is among the items its cell lists, in increasing order: on
+// boxes of very mixed sizes (most small, a few spanning much of the grid), for points inside,
+// exactly on a box's faces and corners, and outside everything.
+TEST(CellGrid, ListsEveryBoxHoldingThePoint) {
+  std::mt19937 rng(7);
+  std::uniform_real_distribution<double> u01(0.0, 1.0);
+  const int n = 2000;
+  std::vector<Vec3> lo(n), hi(n);
+  for (int i = 0; i < n; ++i) {
+    const Vec3 c(100.0 * u01(rng), 40.0 * u01(rng), 5.0 * u01(rng));
+    const double size = i % 97 == 0 ? 60.0 * u01(rng) : 0.5 + u01(rng);
+    const Vec3 half = 0.5 * size * Vec3(u01(rng), u01(rng), u01(rng));
+    lo[i] = c - half, hi[i] = c + half;
+  }
+  const CellGrid grid(lo, hi);
+  EXPECT_LE(static_cast<double>(grid.entries()), 16.0 * n + 64.0);
+  EXPECT_GT(grid.cells(), 100u);  // a grid, not one cell holding everything
+  std::vector<Vec3> points;
+  for (int k = 0; k < 3000; ++k) points.emplace_back(-10.0 + 120.0 * u01(rng), -10.0 + 60.0 * u01(rng), -3.0 + 11.0 * u01(rng));
+  for (int i = 0; i < n; i += 7) {
+    points.push_back(lo[i]), points.push_back(hi[i]);
+    points.emplace_back(lo[i].x(), hi[i].y(), 0.5 * (lo[i].z() + hi[i].z()));
+  }
+  int held = 0;
+  for (const Vec3& p : points) {
+    const std::span<const std::int32_t> items = grid.items_at(p);
+    EXPECT_TRUE(std::is_sorted(items.begin(), items.end()));
+    for (int i = 0; i < n; ++i) {
+      if (!((p.array() >= lo[i].array()).all() && (p.array() <= hi[i].array()).all())) continue;
+      ++held;
+      EXPECT_TRUE(std::binary_search(items.begin(), items.end(), i)) << "box " << i;
+    }
+  }
+  EXPECT_GT(held, 3000);
+}
+
+TEST(CellGrid, EmptyAndDegenerate) {
+  const CellGrid empty;
+  EXPECT_TRUE(empty.items_at(Vec3::Zero()).empty());
+  const CellGrid none(std::vector<Vec3>{}, std::vector<Vec3>{});
+  EXPECT_TRUE(none.items_at(Vec3::Zero()).empty());
+  // Every box the same point: one cell, which lists them all, and nothing beside it.
+  const std::vector<Vec3> at(5, Vec3(1.0, 2.0, 3.0));
+  const CellGrid point(at, at);
+  EXPECT_EQ(point.items_at(Vec3(1.0, 2.0, 3.0)).size(), 5u);
+  EXPECT_TRUE(point.items_at(Vec3(1.0, 2.0, 4.5)).empty());
+  EXPECT_TRUE(point.items_at(Vec3(0.0, 0.0, 0.0)).empty());
+}
+
+}  // namespace
+}  // namespace flank
