@@ -4,6 +4,8 @@
 #include <cstdint>
 #include <unordered_map>
 
+#include "kernels/parallel.h"
+
 namespace flank {
 
 BoundingBox bounding_box(const Mesh& mesh) {
@@ -18,12 +20,14 @@ double bbox_diagonal(const Mesh& mesh) { return bounding_box(mesh).diagonal(); }
 
 Points face_normals(const Mesh& mesh) {
   Points N(mesh.F.rows(), 3);
-  for (Eigen::Index f = 0; f < mesh.F.rows(); ++f) {
-    const Vec3 p0 = mesh.V.row(mesh.F(f, 0));
-    const Vec3 n = (Vec3(mesh.V.row(mesh.F(f, 1))) - p0).cross(Vec3(mesh.V.row(mesh.F(f, 2))) - p0);
-    const double len = n.norm();
-    N.row(f) = len > 0 ? Vec3(n / len) : Vec3::Zero();
-  }
+  parallel_for(0, static_cast<std::size_t>(mesh.F.rows()), [&](std::size_t begin, std::size_t end) {
+    for (auto f = static_cast<Eigen::Index>(begin); f < static_cast<Eigen::Index>(end); ++f) {
+      const Vec3 p0 = mesh.V.row(mesh.F(f, 0));
+      const Vec3 n = (Vec3(mesh.V.row(mesh.F(f, 1))) - p0).cross(Vec3(mesh.V.row(mesh.F(f, 2))) - p0);
+      const double len = n.norm();
+      N.row(f) = len > 0 ? Vec3(n / len) : Vec3::Zero();
+    }
+  }, 4096);
   return N;
 }
 

@@ -5,6 +5,8 @@
 #include <algorithm>
 #include <cmath>
 #include <limits>
+#include <map>
+#include <memory>
 #include <numeric>
 #include <utility>
 
@@ -15,24 +17,46 @@ namespace flank {
 namespace {
 
 constexpr int kLeafItems = ObbTree::kMaxLeafItems;
-// Subtrees larger than this build their two halves concurrently (into their own node lists,
-// joined after): a few levels at the top, so the copies of the join stay small.
-constexpr int kParallelItems = 16384;
+// Subtrees larger than this build their two halves concurrently. Each half writes its nodes
+// straight into its own range of the one node list (a subtree's node count depends on its
+// item count alone), so a split costs a task, not a copy.
+constexpr int kParallelItems = 1024;
+
+// The node count of the subtree over n items (median splits down to kLeafItems), for every
+// n the tree meets: two per level, filled before the build and only read during it.
+class SubtreeSizes {
+ public:
+  explicit SubtreeSizes(int n) { fill(n); }
+  std::int32_t operator()(int n) const { return n <= kLeafItems ? 1 : nodes_.at(n); }
+
+ private:
+  std::int32_t fill(int n) {
+    if (n <= kLeafItems) return 1;
+    if (const auto it = nodes_.find(n); it != nodes_.end()) return it->second;
+    const std::int32_t count = 1 + fill(n / 2) + fill(n - n / 2);
+    nodes_.emplace(n, count);
+    return count;
+  }
+  std::map<int, std::int32_t> nodes_;
+};
 
 // First and second moments of a triangle's corners, relative to the bounding box's centre
 // (so that the covariance of a small node far from the origin does not cancel away).
 struct Moments {
-  Vec3 sum = Vec3::Zero();  // Σ v
-  std::array<double, 6> outer{};  // Σ v vᵀ: xx, yy, zz, xy, xz, yz
+  Vec3 sum;  // Σ v
+  std::array<double, 6> outer;  // Σ v vᵀ: xx, yy, zz, xy, xz, yz
 };
 
 struct Builder {
   std::span<const std::array<Vec3, 3>> triangles;
   std::span<int> items;
-  std::vector<Vec3> centroids;
-  std::vector<Moments> moments;
+  // Per item, left uninitialised until the parallel loop writes them: the first touch of
+  // fresh memory (a page fault per 4 KiB) then happens on every thread, not on one.
+  std::unique_ptr<Vec3[]> centroids;
+  std::unique_ptr<Moments[]> moments;
   double pad = 0.0;
   Vec3 origin = Vec3::Zero();
+  const SubtreeSizes& sizes;
 
   // The box of items[begin, end): principal axes of the corners (an orthonormal frame
   // whatever the spread: a degenerate covariance falls back to the coordinate axes).
@@ -77,21 +101,20 @@ struct Builder {
     return node;
   }
 
-  // Appends the subtree of items[begin, end) to `out` in pre-order; `keys` is scratch.
-  void build(std::vector<ObbNode>& out, int begin, int end,
-             std::vector<std::pair<double, int>>& keys) {
-    const std::size_t self = out.size();
-    out.push_back(box(begin, end));
+  // Writes the subtree of items[begin, end) in pre-order from `self` on (sizes(end - begin)
+  // nodes); `keys` is scratch.
+  void build(ObbNode* self, int begin, int end, std::vector<std::pair<double, int>>& keys) const {
+    *self = box(begin, end);
     if (end - begin <= kLeafItems) {
-      out[self].first = begin;
-      out[self].count = end - begin;
+      self->first = begin;
+      self->count = end - begin;
       return;
     }
     // Median split of the centroids along the box's longest axis; ties by item index, so
     // the halves do not depend on the order the items arrive in.
     int axis = 0;
-    out[self].half.maxCoeff(&axis);
-    const Vec3 dir = out[self].axes[static_cast<std::size_t>(axis)];
+    self->half.maxCoeff(&axis);
+    const Vec3 dir = self->axes[static_cast<std::size_t>(axis)];
     const int mid = begin + (end - begin) / 2;
     keys.resize(static_cast<std::size_t>(end - begin));
     for (int i = begin; i < end; ++i) {
@@ -100,23 +123,21 @@ struct Builder {
     }
     std::nth_element(keys.begin(), keys.begin() + (mid - begin), keys.end());
     for (int i = begin; i < end; ++i) items[static_cast<std::size_t>(i)] = keys[static_cast<std::size_t>(i - begin)].second;
+    self->right = 1 + sizes(mid - begin);
+    ObbNode* left = self + 1;
+    ObbNode* right = self + self->right;
     if (end - begin <= kParallelItems) {
-      build(out, begin, mid, keys);
-      out[self].right = static_cast<std::int32_t>(out.size() - self);
-      build(out, mid, end, keys);
+      build(left, begin, mid, keys);
+      build(right, mid, end, keys);
       return;
     }
-    std::vector<ObbNode> halves[2];
     parallel_invoke_each(2, [&](std::size_t h) {
       std::vector<std::pair<double, int>> scratch;
       if (h == 0)
-        build(halves[0], begin, mid, scratch);
+        build(left, begin, mid, scratch);
       else
-        build(halves[1], mid, end, scratch);
+        build(right, mid, end, scratch);
     });
-    out.insert(out.end(), halves[0].begin(), halves[0].end());
-    out[self].right = static_cast<std::int32_t>(out.size() - self);
-    out.insert(out.end(), halves[1].begin(), halves[1].end());
   }
 };
 
@@ -204,28 +225,30 @@ ObbTree::ObbTree(std::span<const std::array<Vec3, 3>> triangles, double pad) {
   order_.resize(triangles.size());
   std::iota(order_.begin(), order_.end(), 0);
   if (count == 0) return;
-  Builder b{triangles, order_, {}, {}, pad};
+  const SubtreeSizes sizes(count);
+  Builder b{triangles, order_, {}, {}, pad, Vec3::Zero(), sizes};
   Vec3 lo = triangles[0][0], hi = lo;
   for (const auto& t : triangles)
     for (const Vec3& v : t) lo = lo.cwiseMin(v), hi = hi.cwiseMax(v);
   b.origin = 0.5 * (lo + hi);
-  b.centroids.resize(triangles.size());
-  b.moments.resize(triangles.size());
+  b.centroids.reset(new Vec3[triangles.size()]);
+  b.moments.reset(new Moments[triangles.size()]);
   parallel_for(0, triangles.size(), [&](std::size_t begin, std::size_t end) {
     for (std::size_t f = begin; f < end; ++f) {
       b.centroids[f] = (triangles[f][0] + triangles[f][1] + triangles[f][2]) / 3.0;
-      Moments& m = b.moments[f];
+      Moments m{Vec3::Zero(), {}};
       for (const Vec3& corner : triangles[f]) {
         const Vec3 v = corner - b.origin;
         m.sum += v;
         m.outer[0] += v.x() * v.x(), m.outer[1] += v.y() * v.y(), m.outer[2] += v.z() * v.z();
         m.outer[3] += v.x() * v.y(), m.outer[4] += v.x() * v.z(), m.outer[5] += v.y() * v.z();
       }
+      b.moments[f] = m;
     }
   }, 4096);
-  nodes_.reserve(2 * triangles.size() / kLeafItems + 2);
+  nodes_.resize(static_cast<std::size_t>(sizes(count)));
   std::vector<std::pair<double, int>> keys;
-  b.build(nodes_, 0, count, keys);
+  b.build(nodes_.data(), 0, count, keys);
 
   origin_ = b.origin;
   scale_ = 0.5 * (hi - lo).norm();

@@ -11,6 +11,7 @@
 #include <tbb/blocked_range.h>
 #include <tbb/global_control.h>
 #include <tbb/parallel_for.h>
+#include <tbb/parallel_sort.h>
 #include <tbb/task_arena.h>
 #endif
 
@@ -51,6 +52,8 @@ void parallel_invoke_each(std::size_t count, const std::function<void(std::size_
   run_chunks(count, task);
 }
 
+void parallel_sort(std::span<std::pair<std::uint64_t, int>> items) { std::sort(items.begin(), items.end()); }
+
 struct ThreadLimit::Impl {
   int previous = 0;
 };
@@ -83,6 +86,10 @@ void parallel_for(std::size_t begin, std::size_t end,
   }
   tbb::parallel_for(tbb::blocked_range<std::size_t>(begin, end, grain),
                     [&](const tbb::blocked_range<std::size_t>& r) { body(r.begin(), r.end()); });
+}
+
+void parallel_sort(std::span<std::pair<std::uint64_t, int>> items) {
+  tbb::parallel_sort(items.begin(), items.end());
 }
 
 void parallel_invoke_each(std::size_t count, const std::function<void(std::size_t)>& task) {

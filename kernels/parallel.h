@@ -5,8 +5,11 @@
 #pragma once
 
 #include <cstddef>
+#include <cstdint>
 #include <functional>
 #include <memory>
+#include <span>
+#include <utility>
 
 namespace flank {
 
@@ -16,6 +19,10 @@ void parallel_for(std::size_t begin, std::size_t end,
 
 // Runs the tasks concurrently (one task each) and returns when all are done.
 void parallel_invoke_each(std::size_t count, const std::function<void(std::size_t)>& task);
+
+// Sorts ascending by (key, value), concurrently. The pairs' order is total, so the result is
+// the one std::sort gives whatever the thread count.
+void parallel_sort(std::span<std::pair<std::uint64_t, int>> items);
 
 // Caps the worker threads while it lives (--threads). n <= 0 leaves the default.
 class ThreadLimit {

@@ -319,16 +319,18 @@ struct SurfaceIndex::Impl {
 
 void SurfaceIndex::Impl::build_adjacency() {
   const int nf = mesh.face_count();
-  std::vector<std::pair<std::uint64_t, int>> edges;  // (min,max) vertex key, 3 f + k
-  edges.reserve(static_cast<std::size_t>(nf) * 3);
-  for (int f = 0; f < nf; ++f)
-    for (int k = 0; k < 3; ++k) {
-      const auto u = static_cast<std::uint32_t>(mesh.F(f, k));
-      const auto v = static_cast<std::uint32_t>(mesh.F(f, (k + 1) % 3));
-      const std::uint64_t key = (std::uint64_t{std::min(u, v)} << 32) | std::max(u, v);
-      edges.emplace_back(key, 3 * f + k);
-    }
-  std::sort(edges.begin(), edges.end());
+  std::vector<std::pair<std::uint64_t, int>> edges(static_cast<std::size_t>(nf) * 3);  // (min,max) vertex key, 3 f + k
+  parallel_for(0, static_cast<std::size_t>(nf), [&](std::size_t begin, std::size_t end) {
+    for (std::size_t f = begin; f < end; ++f)
+      for (int k = 0; k < 3; ++k) {
+        const auto fi = static_cast<Eigen::Index>(f);
+        const auto u = static_cast<std::uint32_t>(mesh.F(fi, k));
+        const auto v = static_cast<std::uint32_t>(mesh.F(fi, (k + 1) % 3));
+        const std::uint64_t key = (std::uint64_t{std::min(u, v)} << 32) | std::max(u, v);
+        edges[3 * f + static_cast<std::size_t>(k)] = {key, static_cast<int>(3 * f) + k};
+      }
+  }, 4096);
+  parallel_sort(edges);
   edge_boundary.assign(static_cast<std::size_t>(nf), 0);
   vertex_boundary.assign(static_cast<std::size_t>(mesh.vertex_count()), 0);
   edge_start.clear();
@@ -641,8 +643,12 @@ SurfaceIndex::SurfaceIndex(const Mesh& mesh, QueryEngine engine, double reach)
 
   const int nf = mesh.face_count();
   std::vector<Corners> corners(static_cast<std::size_t>(nf));
-  for (int f = 0; f < nf; ++f)
-    corners[static_cast<std::size_t>(f)] = {mesh.V.row(mesh.F(f, 0)), mesh.V.row(mesh.F(f, 1)), mesh.V.row(mesh.F(f, 2))};
+  parallel_for(0, static_cast<std::size_t>(nf), [&](std::size_t begin, std::size_t end) {
+    for (std::size_t f = begin; f < end; ++f) {
+      const auto fi = static_cast<Eigen::Index>(f);
+      corners[f] = {mesh.V.row(mesh.F(fi, 0)), mesh.V.row(mesh.F(fi, 1)), mesh.V.row(mesh.F(fi, 2))};
+    }
+  }, 4096);
   m.build_adjacency();
   if (m.engine == QueryEngine::kEmbree) {
     m.triangles.resize(corners.size());
@@ -726,16 +732,20 @@ void pack_lane(LeafPack& k, int l, const Corners& c) {
 void SurfaceIndex::Impl::build_tree(const std::vector<Corners>& corners, double pad) {
   {
     std::vector<std::array<Vec3, 3>> c(corners.size());
-    for (std::size_t f = 0; f < corners.size(); ++f) c[f] = {corners[f].a, corners[f].b, corners[f].c};
+    parallel_for(0, corners.size(), [&](std::size_t begin, std::size_t end) {
+      for (std::size_t f = begin; f < end; ++f) c[f] = {corners[f].a, corners[f].b, corners[f].c};
+    }, 4096);
     tree = ObbTree(c, pad);
   }
   const std::vector<int>& order = tree.order();
   leaf_corners.resize(order.size());
   face_position.resize(order.size());
-  for (std::size_t i = 0; i < order.size(); ++i) {
-    leaf_corners[i] = corners[static_cast<std::size_t>(order[i])];
-    face_position[static_cast<std::size_t>(order[i])] = static_cast<std::int32_t>(i);
-  }
+  parallel_for(0, order.size(), [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i) {
+      leaf_corners[i] = corners[static_cast<std::size_t>(order[i])];
+      face_position[static_cast<std::size_t>(order[i])] = static_cast<std::int32_t>(i);
+    }
+  }, 4096);
   const std::vector<ObbLeaf>& leaves = tree.leaves();
   packs.resize(leaves.size());
   parallel_for(0, leaves.size(), [&](std::size_t begin, std::size_t end) {
