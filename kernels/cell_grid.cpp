@@ -31,13 +31,16 @@ std::int64_t CellGrid::coordinate(double x, int k) const {
   return static_cast<std::int64_t>(t);
 }
 
+std::size_t CellGrid::probe(std::uint64_t key) const {
+  std::uint64_t s = (key * 0x9E3779B97F4A7C15ull) >> shift_;  // Fibonacci hashing
+  while (keys_[s] != key && keys_[s] != kEmpty) s = (s + 1) & mask_;
+  return static_cast<std::size_t>(s);
+}
+
 std::int64_t CellGrid::slot_of(std::uint64_t key) const {
   if (keys_.empty()) return -1;
-  std::uint64_t s = (key * 0x9E3779B97F4A7C15ull) >> (64 - std::countr_zero(mask_ + 1));
-  for (;; s = (s + 1) & mask_) {
-    if (keys_[s] == key) return static_cast<std::int64_t>(s);
-    if (keys_[s] == kEmpty) return -1;
-  }
+  const std::size_t s = probe(key);
+  return keys_[s] == key ? static_cast<std::int64_t>(s) : -1;
 }
 
 CellGrid::CellGrid(std::span<const Vec3> lo, std::span<const Vec3> hi) {
@@ -58,10 +61,11 @@ CellGrid::CellGrid(std::span<const Vec3> lo, std::span<const Vec3> hi) {
 
   // Each item's cell ranges; doubling the cells while the boxes span too many.
   std::vector<std::array<std::int64_t, 6>> range(n);
+  double pairs = 0.0;  // (item, cell): counted in double, a too small cell may overflow
   for (;;) {
     inverse_ = 1.0 / cell_;
     for (int k = 0; k < 3; ++k) dims_[k] = static_cast<std::int64_t>((ghi[k] - origin_[k]) * inverse_) + 1;
-    double pairs = 0.0;
+    pairs = 0.0;
     for (std::size_t i = 0; i < n; ++i) {
       double cells = 1.0;
       for (int k = 0; k < 3; ++k) {
@@ -78,17 +82,14 @@ CellGrid::CellGrid(std::span<const Vec3> lo, std::span<const Vec3> hi) {
 
   // Occupied cells in an open-addressing table of at least twice as many slots as pairs;
   // counted, then filled in item order.
-  std::size_t pairs = 0;
-  for (const auto& r : range)
-    pairs += static_cast<std::size_t>((r[3] - r[0] + 1) * (r[4] - r[1] + 1) * (r[5] - r[2] + 1));
-  const std::size_t capacity = std::bit_ceil(std::max<std::size_t>(2 * pairs, 16));
+  const auto total = static_cast<std::size_t>(pairs);  // exact: at most 16 per item here
+  const std::size_t capacity = std::bit_ceil(std::max<std::size_t>(2 * total, 16));
   mask_ = capacity - 1;
+  shift_ = 64 - std::countr_zero(capacity);
   keys_.assign(capacity, kEmpty);
   std::vector<std::int32_t> count(capacity, 0);
-  const int shift = 64 - std::countr_zero(capacity);
   auto insert = [&](std::uint64_t key) {
-    std::uint64_t s = (key * 0x9E3779B97F4A7C15ull) >> shift;
-    while (keys_[s] != key && keys_[s] != kEmpty) s = (s + 1) & mask_;
+    const std::size_t s = probe(key);
     if (keys_[s] == kEmpty) keys_[s] = key, ++cells_;
     return s;
   };
@@ -100,7 +101,7 @@ CellGrid::CellGrid(std::span<const Vec3> lo, std::span<const Vec3> hi) {
   for (std::size_t i = 0; i < n; ++i) for_cells(range[i], [&](std::uint64_t key) { ++count[insert(key)]; });
   start_.assign(capacity + 1, 0);
   for (std::size_t s = 0; s < capacity; ++s) start_[s + 1] = start_[s] + count[s];
-  items_.resize(pairs);
+  items_.resize(total);
   std::vector<std::int32_t> fill(start_.begin(), start_.end() - 1);
   for (std::size_t i = 0; i < n; ++i)
     for_cells(range[i], [&](std::uint64_t key) {

@@ -26,13 +26,14 @@ class CellGrid {
   // one of the box's cells whatever the rounding).
   std::span<const std::int32_t> items_at(const Vec3& p) const;
 
-  double cell_size() const { return cell_; }
   std::size_t cells() const { return cells_; }
   std::size_t entries() const { return items_.size(); }
 
  private:
   // The cell coordinate of x along axis k, or -1 beyond the grid.
   std::int64_t coordinate(double x, int k) const;
+  // The slot holding `key`, or the free slot where it would go (linear probing).
+  std::size_t probe(std::uint64_t key) const;
   std::int64_t slot_of(std::uint64_t key) const;  // -1 if the cell is empty
 
   Vec3 origin_ = Vec3::Zero();
@@ -44,6 +45,7 @@ class CellGrid {
   std::vector<std::int32_t> start_;
   std::vector<std::int32_t> items_;
   std::uint64_t mask_ = 0;
+  int shift_ = 64;  // a key's home slot: its hash's top bits
   std::size_t cells_ = 0;
 };
 
