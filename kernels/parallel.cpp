@@ -52,7 +52,7 @@ void parallel_invoke_each(std::size_t count, const std::function<void(std::size_
   run_chunks(count, task);
 }
 
-void parallel_sort(std::span<std::pair<std::uint64_t, int>> items) { std::sort(items.begin(), items.end()); }
+void parallel_sort(std::span<KeyedIndex> items) { std::sort(items.begin(), items.end()); }
 
 struct ThreadLimit::Impl {
   int previous = 0;
@@ -88,7 +88,7 @@ void parallel_for(std::size_t begin, std::size_t end,
                     [&](const tbb::blocked_range<std::size_t>& r) { body(r.begin(), r.end()); });
 }
 
-void parallel_sort(std::span<std::pair<std::uint64_t, int>> items) {
+void parallel_sort(std::span<KeyedIndex> items) {
   tbb::parallel_sort(items.begin(), items.end());
 }
 

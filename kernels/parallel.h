@@ -20,9 +20,47 @@ void parallel_for(std::size_t begin, std::size_t end,
 // Runs the tasks concurrently (one task each) and returns when all are done.
 void parallel_invoke_each(std::size_t count, const std::function<void(std::size_t)>& task);
 
-// Sorts ascending by (key, value), concurrently. The pairs' order is total, so the result is
-// the one std::sort gives whatever the thread count.
-void parallel_sort(std::span<std::pair<std::uint64_t, int>> items);
+// A key and the index it belongs to, ordered by both. Trivial: a buffer of them costs no
+// writes until a parallel loop fills it (see Buffer).
+struct KeyedIndex {
+  std::uint64_t key;
+  std::int32_t index;
+  friend bool operator<(const KeyedIndex& a, const KeyedIndex& b) {
+    return a.key < b.key || (a.key == b.key && a.index < b.index);
+  }
+  friend bool operator==(const KeyedIndex&, const KeyedIndex&) = default;
+};
+
+// Sorts ascending by (key, index), concurrently. The order is total, so the result is the one
+// std::sort gives whatever the thread count.
+void parallel_sort(std::span<KeyedIndex> items);
+
+// A fixed number of elements, default-initialised: for elements without a constructor that
+// writes (Eigen vectors, floats), nothing is written until the code that fills them does.
+// A std::vector of n zeroes its memory on the calling thread, so the first touch of every
+// fresh page (a fault per 4 KiB) happens there, serially, before a parallel loop can fill it.
+template <class T>
+class Buffer {
+ public:
+  Buffer() = default;
+  explicit Buffer(std::size_t n) : data_(n ? std::make_unique_for_overwrite<T[]>(n) : nullptr), size_(n) {}
+  std::size_t size() const { return size_; }
+  bool empty() const { return size_ == 0; }
+  T* data() { return data_.get(); }
+  const T* data() const { return data_.get(); }
+  T& operator[](std::size_t i) { return data_[i]; }
+  const T& operator[](std::size_t i) const { return data_[i]; }
+  T* begin() { return data(); }
+  T* end() { return data() + size_; }
+  const T* begin() const { return data(); }
+  const T* end() const { return data() + size_; }
+  operator std::span<T>() { return {data(), size_}; }
+  operator std::span<const T>() const { return {data(), size_}; }
+
+ private:
+  std::unique_ptr<T[]> data_;
+  std::size_t size_ = 0;
+};
 
 // Caps the worker threads while it lives (--threads). n <= 0 leaves the default.
 class ThreadLimit {

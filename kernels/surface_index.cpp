@@ -136,11 +136,13 @@ struct alignas(16) LeafPack {
   float nx[kLanes], ny[kLanes], nz[kLanes];     // unit normal
   float bx[kLanes], cx[kLanes], cy[kLanes];     // b and c in the frame
   float inv_ab[kLanes], inv_ac[kLanes], inv_bc[kLanes];  // 1/|ab|², 1/|ac|², 1/|bc|²
-  Vec3 origin = Vec3::Zero();                   // the mean of the leaf's corners
-  double radius = 0.0;                          // of the leaf's corners about the origin
-  std::int32_t first = 0, count = 0;            // positions in the leaf order
+  // No default member initialisers: a Buffer of packs is first written by the parallel loop
+  // that fills it, not on one thread before.
+  Vec3 origin;                                  // the mean of the leaf's corners
+  double radius;                                // of the leaf's corners about the origin
+  std::int32_t first, count;                    // positions in the leaf order
   // Lanes whose frame single precision cannot hold (a sliver): always tested exactly.
-  std::uint32_t always = 0;
+  std::uint32_t always;
 };
 
 // Squared distances from q (relative to the pack's origin) to the pack's triangles in single
@@ -265,12 +267,12 @@ struct SurfaceIndex::Impl {
   QueryEngine engine = QueryEngine::kBoxTree;
   std::vector<Triangle> triangles;          // kEmbree: per face, for the exact callback
   ObbTree tree;                             // kBoxTree
-  std::vector<Corners> leaf_corners;        // kBoxTree: per position of the leaf order, contiguous
-  std::vector<std::int32_t> face_position;  // kBoxTree: face → position (tree.order() inverts it)
-  std::vector<LeafPack> packs;              // kBoxTree: per leaf of tree.leaves()
+  Buffer<Corners> leaf_corners;             // kBoxTree: per position of the leaf order, contiguous
+  Buffer<std::int32_t> face_position;       // kBoxTree: face → position (tree.order() inverts it)
+  Buffer<LeafPack> packs;                   // kBoxTree: per leaf of tree.leaves()
   double reach = kInf;                      // kCells: the farthest a query may look
   CellGrid cells;                           // kCells: over the faces' boxes grown by reach
-  std::vector<Corners> face_corners;        // kCells: per face
+  Buffer<Corners> face_corners;             // kCells: per face
   std::vector<std::uint8_t> edge_boundary;  // per face, bit k: edge (k, k+1 mod 3) is a boundary
   std::vector<std::uint8_t> vertex_boundary;
   // For queries over a subset of the faces: the faces' edge slots (3 f + k) grouped by edge
@@ -306,7 +308,7 @@ struct SurfaceIndex::Impl {
   bool masked_edge_boundary(int group, const char* mask) const;
   bool masked_on_boundary(int f, int region, const char* mask) const;
   void build_scene();
-  void build_tree(const std::vector<Corners>& corners, double pad);
+  void build_tree(std::span<const Corners> corners, double pad);
 
   // Only faces within max_distance count (infinity: all), and only those with mask[f] != 0
   // (null: all), as if the index held those alone.
@@ -319,7 +321,7 @@ struct SurfaceIndex::Impl {
 
 void SurfaceIndex::Impl::build_adjacency() {
   const int nf = mesh.face_count();
-  std::vector<std::pair<std::uint64_t, int>> edges(static_cast<std::size_t>(nf) * 3);  // (min,max) vertex key, 3 f + k
+  Buffer<KeyedIndex> edges(static_cast<std::size_t>(nf) * 3);  // (min,max) vertex key, 3 f + k
   parallel_for(0, static_cast<std::size_t>(nf), [&](std::size_t begin, std::size_t end) {
     for (std::size_t f = begin; f < end; ++f)
       for (int k = 0; k < 3; ++k) {
@@ -327,7 +329,7 @@ void SurfaceIndex::Impl::build_adjacency() {
         const auto u = static_cast<std::uint32_t>(mesh.F(fi, k));
         const auto v = static_cast<std::uint32_t>(mesh.F(fi, (k + 1) % 3));
         const std::uint64_t key = (std::uint64_t{std::min(u, v)} << 32) | std::max(u, v);
-        edges[3 * f + static_cast<std::size_t>(k)] = {key, static_cast<int>(3 * f) + k};
+        edges[3 * f + static_cast<std::size_t>(k)] = {key, static_cast<std::int32_t>(3 * f) + k};
       }
   }, 4096);
   parallel_sort(edges);
@@ -338,16 +340,16 @@ void SurfaceIndex::Impl::build_adjacency() {
   slot_edge.resize(edges.size());
   for (std::size_t i = 0; i < edges.size();) {
     std::size_t j = i + 1;
-    while (j < edges.size() && edges[j].first == edges[i].first) ++j;
+    while (j < edges.size() && edges[j].key == edges[i].key) ++j;
     const auto group = static_cast<std::int32_t>(edge_start.size());
     edge_start.push_back(static_cast<std::int32_t>(i));
     for (std::size_t k = i; k < j; ++k) {
-      edge_slots[k] = edges[k].second;
-      slot_edge[static_cast<std::size_t>(edges[k].second)] = group;
+      edge_slots[k] = edges[k].index;
+      slot_edge[static_cast<std::size_t>(edges[k].index)] = group;
     }
     if (j - i == 1) {  // an edge of exactly one face
-      const int f = edges[i].second / 3;
-      const int k = edges[i].second % 3;
+      const int f = edges[i].index / 3;
+      const int k = edges[i].index % 3;
       edge_boundary[static_cast<std::size_t>(f)] |= static_cast<std::uint8_t>(1u << k);
       vertex_boundary[static_cast<std::size_t>(mesh.F(f, k))] = 1;
       vertex_boundary[static_cast<std::size_t>(mesh.F(f, (k + 1) % 3))] = 1;
@@ -642,7 +644,7 @@ SurfaceIndex::SurfaceIndex(const Mesh& mesh, QueryEngine engine, double reach)
   m.on_surface = 1e-14 * scale;
 
   const int nf = mesh.face_count();
-  std::vector<Corners> corners(static_cast<std::size_t>(nf));
+  Buffer<Corners> corners(static_cast<std::size_t>(nf));
   parallel_for(0, static_cast<std::size_t>(nf), [&](std::size_t begin, std::size_t end) {
     for (std::size_t f = begin; f < end; ++f) {
       const auto fi = static_cast<Eigen::Index>(f);
@@ -729,17 +731,17 @@ void pack_lane(LeafPack& k, int l, const Corners& c) {
 
 }  // namespace
 
-void SurfaceIndex::Impl::build_tree(const std::vector<Corners>& corners, double pad) {
+void SurfaceIndex::Impl::build_tree(std::span<const Corners> corners, double pad) {
   {
-    std::vector<std::array<Vec3, 3>> c(corners.size());
+    Buffer<std::array<Vec3, 3>> c(corners.size());
     parallel_for(0, corners.size(), [&](std::size_t begin, std::size_t end) {
       for (std::size_t f = begin; f < end; ++f) c[f] = {corners[f].a, corners[f].b, corners[f].c};
     }, 4096);
     tree = ObbTree(c, pad);
   }
   const std::vector<int>& order = tree.order();
-  leaf_corners.resize(order.size());
-  face_position.resize(order.size());
+  leaf_corners = Buffer<Corners>(order.size());
+  face_position = Buffer<std::int32_t>(order.size());
   parallel_for(0, order.size(), [&](std::size_t begin, std::size_t end) {
     for (std::size_t i = begin; i < end; ++i) {
       leaf_corners[i] = corners[static_cast<std::size_t>(order[i])];
@@ -747,11 +749,12 @@ void SurfaceIndex::Impl::build_tree(const std::vector<Corners>& corners, double 
     }
   }, 4096);
   const std::vector<ObbLeaf>& leaves = tree.leaves();
-  packs.resize(leaves.size());
+  packs = Buffer<LeafPack>(leaves.size());
   parallel_for(0, leaves.size(), [&](std::size_t begin, std::size_t end) {
     for (std::size_t i = begin; i < end; ++i) {
       LeafPack& k = packs[i];
-      k = LeafPack{};
+      k.radius = 0.0;  // every lane's arrays are written below (pack_lane)
+      k.always = 0;
       k.first = leaves[i].first;
       k.count = leaves[i].count;
       assert(k.count >= 1 && k.count <= LeafPack::kLanes);

@@ -15,16 +15,32 @@ namespace {
 // (the index adjacency sorts edge keys that repeat once per face sharing the edge).
 TEST(Parallel, SortEqualsStdSortWhateverTheThreadCount) {
   std::mt19937_64 rng(5);
-  std::vector<std::pair<std::uint64_t, int>> items(200000);
-  for (std::size_t i = 0; i < items.size(); ++i) items[i] = {rng() % 50000, static_cast<int>(rng() % 1000)};
-  std::vector<std::pair<std::uint64_t, int>> expected = items;
+  std::vector<KeyedIndex> items(200000);
+  for (std::size_t i = 0; i < items.size(); ++i) items[i] = {rng() % 50000, static_cast<std::int32_t>(rng() % 1000)};
+  std::vector<KeyedIndex> expected = items;
   std::sort(expected.begin(), expected.end());
   for (const int threads : {1, 2}) {
     const ThreadLimit limit(threads);
-    std::vector<std::pair<std::uint64_t, int>> sorted = items;
+    std::vector<KeyedIndex> sorted = items;
     parallel_sort(sorted);
     EXPECT_EQ(sorted, expected) << threads << " threads";
   }
+}
+
+// A Buffer's elements are what its filler writes; an empty one holds nothing.
+TEST(Parallel, BufferHoldsWhatAParallelLoopWrites) {
+  Buffer<double> b(100000);
+  ASSERT_EQ(b.size(), 100000u);
+  parallel_for(0, b.size(), [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i) b[i] = 0.5 * static_cast<double>(i);
+  }, 1024);
+  for (std::size_t i = 0; i < b.size(); ++i) ASSERT_EQ(b[i], 0.5 * static_cast<double>(i));
+  const std::span<const double> view = std::as_const(b);
+  EXPECT_EQ(view.size(), b.size());
+  EXPECT_EQ(view.data(), b.data());
+  const Buffer<int> none(0);
+  EXPECT_TRUE(none.empty());
+  EXPECT_EQ(none.begin(), none.end());
 }
 
 }  // namespace
