@@ -3,6 +3,7 @@
 #include <Eigen/Eigenvalues>
 
 #include <algorithm>
+#include <cassert>
 #include <cmath>
 #include <limits>
 #include <map>
@@ -147,21 +148,71 @@ float round_up(double x) {
   return std::nextafter(static_cast<float>(x), std::numeric_limits<float>::infinity());
 }
 
-// Collapses the binary tree into nodes of up to four children (ObbWideNode).
+// The wide nodes and leaves of the collapsed subtree of a binary node over n items, for every
+// n the tree meets: like the binary subtree's size, they depend on n alone, so that each
+// lane's part of the wide-node and leaf lists is known before it is built.
+class WideSizes {
+ public:
+  struct Counts {
+    std::int32_t wide = 0, leaves = 0;
+  };
+  explicit WideSizes(int n) { fill(n); }
+  Counts operator()(int n) const { return n <= kLeafItems ? Counts{0, 1} : counts_.at(n); }
+
+  // The item counts of the lanes of a wide node made from a binary node over n > kLeafItems
+  // items: each child, or where it is inner, its two children. Returns the lane count.
+  static int lanes(int n, int* out) {
+    int count = 0;
+    for (const int c : {n / 2, n - n / 2}) {
+      if (c <= kLeafItems) {
+        out[count++] = c;
+      } else {
+        out[count++] = c / 2;
+        out[count++] = c - c / 2;
+      }
+    }
+    return count;
+  }
+
+ private:
+  Counts fill(int n) {
+    if (n <= kLeafItems) return {0, 1};
+    if (const auto it = counts_.find(n); it != counts_.end()) return it->second;
+    int lane_items[ObbWideNode::kLanes];
+    const int count = lanes(n, lane_items);
+    Counts c{1, 0};
+    for (int l = 0; l < count; ++l) {
+      const Counts sub = fill(lane_items[l]);
+      c.wide += sub.wide;
+      c.leaves += sub.leaves;
+    }
+    counts_.emplace(n, c);
+    return c;
+  }
+  std::map<int, Counts> counts_;
+};
+
+// Collapses the binary tree into nodes of up to four children (ObbWideNode), in pre-order:
+// a wide node, then its lanes' subtrees in lane order; leaves in the order they are met.
+// Each lane's range of both lists is known in advance (WideSizes), so large subtrees are
+// collapsed concurrently into their own ranges.
 struct Collapser {
   const std::vector<ObbNode>& nodes;
   Vec3 origin;
   std::vector<ObbWideNode>& wide;
   std::vector<ObbLeaf>& leaves;
+  const WideSizes& sizes;
 
-  // The lane code of binary node n: a leaf's (negative) or a new wide node's index.
-  std::int32_t lane(std::int32_t n) {
+  // The lane code of binary node n over `items` items: a leaf's (negative, written at
+  // leaves[leaf]) or the index of the wide node written at wide[index].
+  std::int32_t lane(std::int32_t n, int items, std::int32_t index, std::int32_t leaf) {
     const ObbNode& b = nodes[static_cast<std::size_t>(n)];
     if (b.leaf()) {
-      leaves.push_back({b.first, b.count});
-      return -static_cast<std::int32_t>(leaves.size());
+      leaves[static_cast<std::size_t>(leaf)] = {b.first, b.count};
+      return -1 - leaf;
     }
-    return node(n);
+    node(n, items, index, leaf);
+    return index;
   }
 
   // Widens lane l's float box to hold the double `box`: the half extents are computed from the
@@ -184,9 +235,10 @@ struct Collapser {
     }
   }
 
-  // A wide node for inner binary node n: its grandchildren, or a child itself where that is
-  // a leaf.
-  std::int32_t node(std::int32_t n) {
+  // Writes the wide node for inner binary node n over `items` items at wide[index] (its
+  // lanes: n's grandchildren, or a child itself where that is a leaf), its subtrees after it
+  // and their leaves from leaves[leaf] on.
+  void node(std::int32_t n, int items, std::int32_t index, std::int32_t leaf) {
     std::int32_t lanes[ObbWideNode::kLanes];
     int count = 0;
     const ObbNode& b = nodes[static_cast<std::size_t>(n)];
@@ -199,10 +251,13 @@ struct Collapser {
         lanes[count++] = c + child.right;
       }
     }
-    const auto index = static_cast<std::int32_t>(wide.size());
-    wide.emplace_back();
+    int lane_items[ObbWideNode::kLanes];
+    [[maybe_unused]] const int lane_count = WideSizes::lanes(items, lane_items);
+    assert(lane_count == count);
     ObbWideNode w{};
     w.count = count;
+    std::int32_t first_index[ObbWideNode::kLanes], first_leaf[ObbWideNode::kLanes];
+    std::int32_t next_index = index + 1, next_leaf = leaf;
     for (int l = 0; l < count; ++l) {
       const ObbNode& box = nodes[static_cast<std::size_t>(lanes[l])];
       for (int j = 0; j < 3; ++j) {
@@ -211,10 +266,19 @@ struct Collapser {
           w.axes[3 * k + j][l] = static_cast<float>(box.axes[static_cast<std::size_t>(k)][j]);
       }
       set_half(w, l, box);
+      first_index[l] = next_index, first_leaf[l] = next_leaf;
+      const WideSizes::Counts sub = sizes(lane_items[l]);
+      next_index += sub.wide, next_leaf += sub.leaves;
     }
-    for (int l = 0; l < count; ++l) w.child[l] = lane(lanes[l]);
+    const auto collapse = [&](std::size_t l) {
+      w.child[l] = lane(lanes[l], lane_items[l], first_index[l], first_leaf[l]);
+    };
+    if (items <= kParallelItems) {
+      for (int l = 0; l < count; ++l) collapse(static_cast<std::size_t>(l));
+    } else {
+      parallel_invoke_each(static_cast<std::size_t>(count), collapse);
+    }
     wide[static_cast<std::size_t>(index)] = w;
-    return index;
   }
 };
 
@@ -252,11 +316,12 @@ ObbTree::ObbTree(std::span<const std::array<Vec3, 3>> triangles, double pad) {
 
   origin_ = b.origin;
   scale_ = 0.5 * (hi - lo).norm();
-  Collapser c{nodes_, origin_, wide_, leaves_};
-  if (nodes_.front().leaf())
-    c.lane(0);
-  else
-    c.node(0);
+  const WideSizes wide_sizes(count);
+  const WideSizes::Counts total = wide_sizes(count);
+  wide_.resize(static_cast<std::size_t>(total.wide));
+  leaves_.resize(static_cast<std::size_t>(total.leaves));
+  Collapser c{nodes_, origin_, wide_, leaves_, wide_sizes};
+  c.lane(0, count, 0, 0);
 }
 
 }  // namespace flank

@@ -8,6 +8,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstring>
 #include <limits>
 #include <random>
 #include <string>
@@ -162,11 +163,15 @@ TEST(ObbTree, SameTreeWhateverTheThreadCount) {
   const auto tri = corners_of(m);
   std::vector<ObbNode> one;
   std::vector<int> one_order;
+  std::vector<ObbWideNode> one_wide;
+  std::vector<ObbLeaf> one_leaves;
   {
     const ThreadLimit limit(1);
     const ObbTree tree(tri, 1e-12);
     one = tree.nodes();
     one_order = tree.order();
+    one_wide = tree.wide_nodes();
+    one_leaves = tree.leaves();
   }
   const ObbTree two(tri, 1e-12);
   ASSERT_EQ(two.nodes().size(), one.size());
@@ -176,6 +181,53 @@ TEST(ObbTree, SameTreeWhateverTheThreadCount) {
     EXPECT_EQ(two.nodes()[n].half, one[n].half);
     EXPECT_EQ(two.nodes()[n].right, one[n].right);
     EXPECT_EQ(two.nodes()[n].first, one[n].first);
+  }
+  // The wide nodes (collapsed concurrently above 1024 items) and leaves, byte for byte.
+  ASSERT_EQ(two.wide_nodes().size(), one_wide.size());
+  ASSERT_EQ(two.leaves().size(), one_leaves.size());
+  EXPECT_EQ(std::memcmp(two.wide_nodes().data(), one_wide.data(), one_wide.size() * sizeof(ObbWideNode)), 0);
+  for (std::size_t k = 0; k < one_leaves.size(); ++k) {
+    EXPECT_EQ(two.leaves()[k].first, one_leaves[k].first);
+    EXPECT_EQ(two.leaves()[k].count, one_leaves[k].count);
+  }
+}
+
+// The wide tree is in pre-order: a node's first inner lane is the next node, every node but
+// the root is some lane's child exactly once, and the leaves, met left to right, cover the
+// item order without gap or overlap.
+TEST(ObbTree, WideNodesAndLeavesInPreOrder) {
+  for (const int n : {40, 150}) {  // 3,200 and 45,000 triangles
+    const ObbTree tree(corners_of(wavy_sheet(n)), 1e-12);
+    const std::vector<ObbWideNode>& wide = tree.wide_nodes();
+    std::vector<int> parents(wide.size(), 0), leaf_parents(tree.leaves().size(), 0);
+    for (std::size_t i = 0; i < wide.size(); ++i) {
+      bool first_inner = true;
+      for (int l = 0; l < wide[i].count; ++l) {
+        const std::int32_t c = wide[i].child[l];
+        if (c < 0) {
+          ++leaf_parents[static_cast<std::size_t>(-1 - c)];
+          continue;
+        }
+        ASSERT_LT(static_cast<std::size_t>(c), wide.size());
+        EXPECT_GT(static_cast<std::size_t>(c), i);
+        if (first_inner) {
+          EXPECT_EQ(static_cast<std::size_t>(c), i + 1);
+        }
+        first_inner = false;
+        ++parents[static_cast<std::size_t>(c)];
+      }
+    }
+    EXPECT_EQ(parents[0], 0);
+    for (std::size_t i = 1; i < parents.size(); ++i) EXPECT_EQ(parents[i], 1) << "wide node " << i;
+    for (std::size_t k = 0; k < leaf_parents.size(); ++k) EXPECT_EQ(leaf_parents[k], 1) << "leaf " << k;
+    std::int32_t next = 0;
+    for (const ObbLeaf& leaf : tree.leaves()) {
+      EXPECT_EQ(leaf.first, next);
+      EXPECT_GE(leaf.count, 1);
+      EXPECT_LE(leaf.count, ObbTree::kMaxLeafItems);
+      next = leaf.first + leaf.count;
+    }
+    EXPECT_EQ(static_cast<std::size_t>(next), tree.order().size());
   }
 }
 
