@@ -76,6 +76,8 @@ struct Builder {
     cov = cov / n - mean_rel * mean_rel.transpose();
     const Vec3 mean = mean_rel + origin;
     ObbNode node;
+    node.axes = {Vec3::UnitX(), Vec3::UnitY(), Vec3::UnitZ()};  // unless the spread gives better
+    node.right = node.first = node.count = 0;
     Eigen::SelfAdjointEigenSolver<Mat3> eig;
     eig.computeDirect(cov);
     // Eigenvalues ascend: axes[0] is across the surface, axes[2] along its longest spread.
@@ -197,10 +199,10 @@ class WideSizes {
 // Each lane's range of both lists is known in advance (WideSizes), so large subtrees are
 // collapsed concurrently into their own ranges.
 struct Collapser {
-  const std::vector<ObbNode>& nodes;
+  std::span<const ObbNode> nodes;
   Vec3 origin;
-  std::vector<ObbWideNode>& wide;
-  std::vector<ObbLeaf>& leaves;
+  std::span<ObbWideNode> wide;
+  std::span<ObbLeaf> leaves;
   const WideSizes& sizes;
 
   // The lane code of binary node n over `items` items: a leaf's (negative, written at
@@ -310,7 +312,7 @@ ObbTree::ObbTree(std::span<const std::array<Vec3, 3>> triangles, double pad) {
       b.moments[f] = m;
     }
   }, 4096);
-  nodes_.resize(static_cast<std::size_t>(sizes(count)));
+  nodes_ = Buffer<ObbNode>(static_cast<std::size_t>(sizes(count)));
   std::vector<std::pair<double, int>> keys;
   b.build(nodes_.data(), 0, count, keys);
 
@@ -318,8 +320,8 @@ ObbTree::ObbTree(std::span<const std::array<Vec3, 3>> triangles, double pad) {
   scale_ = 0.5 * (hi - lo).norm();
   const WideSizes wide_sizes(count);
   const WideSizes::Counts total = wide_sizes(count);
-  wide_.resize(static_cast<std::size_t>(total.wide));
-  leaves_.resize(static_cast<std::size_t>(total.leaves));
+  wide_ = Buffer<ObbWideNode>(static_cast<std::size_t>(total.wide));
+  leaves_ = Buffer<ObbLeaf>(static_cast<std::size_t>(total.leaves));
   Collapser c{nodes_, origin_, wide_, leaves_, wide_sizes};
   c.lane(0, count, 0, 0);
 }

@@ -18,19 +18,22 @@
 #include <vector>
 
 #include "kernels/lanes.h"
+#include "kernels/parallel.h"
 #include "kernels/types.h"
 
 namespace flank {
 
+// No default member initialisers: the build writes every field of every node, and the tree's
+// node array is not filled with defaults first (that was a serial pass over fresh memory).
 struct ObbNode {
-  Vec3 centre = Vec3::Zero();
-  std::array<Vec3, 3> axes{Vec3::UnitX(), Vec3::UnitY(), Vec3::UnitZ()};  // orthonormal
-  Vec3 half = Vec3::Zero();  // half extents along the axes, padded for rounding
+  Vec3 centre;
+  std::array<Vec3, 3> axes;  // orthonormal
+  Vec3 half;                 // half extents along the axes, padded for rounding
   // Inner node: the left child is the next node (pre-order), the right one `right` nodes on.
   // Leaf: right == 0 and the items are order()[first, first + count).
-  std::int32_t right = 0;
-  std::int32_t first = 0;
-  std::int32_t count = 0;
+  std::int32_t right;
+  std::int32_t first;
+  std::int32_t count;
 
   bool leaf() const { return right == 0; }
 
@@ -78,13 +81,13 @@ class ObbTree {
   ObbTree(std::span<const std::array<Vec3, 3>> triangles, double pad);
 
   // The binary tree in pre-order, in double precision (what the wide nodes are made from).
-  const std::vector<ObbNode>& nodes() const { return nodes_; }
+  std::span<const ObbNode> nodes() const { return nodes_; }
   // Item (triangle) indices in leaf order.
   const std::vector<int>& order() const { return order_; }
   // The tree as queries walk it (node 0 is the root unless the whole tree is one leaf), its
   // leaves, and the point its float boxes are relative to.
-  const std::vector<ObbWideNode>& wide_nodes() const { return wide_; }
-  const std::vector<ObbLeaf>& leaves() const { return leaves_; }
+  std::span<const ObbWideNode> wide_nodes() const { return wide_; }
+  std::span<const ObbLeaf> leaves() const { return leaves_; }
   const Vec3& origin() const { return origin_; }
 
   // Depth-first, nearest box first. `visit(leaf)` is called for every leaf whose box may hold
@@ -99,10 +102,11 @@ class ObbTree {
   // The squared pruning distance in float: √best_d2 widened by the float error bound.
   float threshold(double best_d2, double query_scale) const;
 
-  std::vector<ObbNode> nodes_;
+  // Buffers (kernels/parallel.h): written by the concurrent build, not zeroed before.
+  Buffer<ObbNode> nodes_;
   std::vector<int> order_;
-  std::vector<ObbWideNode> wide_;
-  std::vector<ObbLeaf> leaves_;
+  Buffer<ObbWideNode> wide_;
+  Buffer<ObbLeaf> leaves_;
   Vec3 origin_ = Vec3::Zero();  // wide boxes are relative to it
   double scale_ = 0.0;          // the coordinates' magnitude about origin_
 };

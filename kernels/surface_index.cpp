@@ -10,6 +10,7 @@
 #include <cstdint>
 #include <cstdio>
 #include <limits>
+#include <mutex>
 #include <stdexcept>
 #include <string>
 
@@ -273,13 +274,14 @@ struct SurfaceIndex::Impl {
   double reach = kInf;                      // kCells: the farthest a query may look
   CellGrid cells;                           // kCells: over the faces' boxes grown by reach
   Buffer<Corners> face_corners;             // kCells: per face
-  std::vector<std::uint8_t> edge_boundary;  // per face, bit k: edge (k, k+1 mod 3) is a boundary
+  Buffer<std::uint8_t> edge_boundary;       // per face, bit k: edge (k, k+1 mod 3) is a boundary
   std::vector<std::uint8_t> vertex_boundary;
   // For queries over a subset of the faces: the faces' edge slots (3 f + k) grouped by edge
   // (slots of group g: edge_slots[edge_start[g] .. edge_start[g + 1])), each slot's group, and
   // each vertex's faces (vertex_faces[vertex_start[v] .. vertex_start[v + 1])).
   std::vector<std::int32_t> edge_start, edge_slots, slot_edge;
   std::vector<std::int32_t> vertex_start, vertex_faces;
+  mutable std::once_flag subset_once;
   Vec3 origin = Vec3::Zero();  // bbox centre; Embree gets coordinates relative to it
   double diagonal = 0.0;
   double slack = 0.0;       // absolute part of the conservative float radius
@@ -304,7 +306,14 @@ struct SurfaceIndex::Impl {
                              ")");
   }
 
-  void build_adjacency();
+  // edge_boundary and vertex_boundary.
+  void build_boundary();
+  // What masked queries need beyond them (edge_start … vertex_faces): built for the index
+  // made by within_reach, whose queries are masked, and otherwise on the first masked query.
+  void build_subset_adjacency();
+  void need_subset_adjacency() const {
+    std::call_once(subset_once, [this] { const_cast<Impl*>(this)->build_subset_adjacency(); });
+  }
   bool masked_edge_boundary(int group, const char* mask) const;
   bool masked_on_boundary(int f, int region, const char* mask) const;
   void build_scene();
@@ -319,9 +328,11 @@ struct SurfaceIndex::Impl {
                                   const char* mask) const;
 };
 
-void SurfaceIndex::Impl::build_adjacency() {
+// Every edge slot (3 f + k: edge (k, k + 1 mod 3) of face f) keyed by its vertex pair, sorted:
+// the slots of one edge are adjacent.
+Buffer<KeyedIndex> sorted_edge_slots(const Mesh& mesh) {
   const int nf = mesh.face_count();
-  Buffer<KeyedIndex> edges(static_cast<std::size_t>(nf) * 3);  // (min,max) vertex key, 3 f + k
+  Buffer<KeyedIndex> edges(static_cast<std::size_t>(nf) * 3);
   parallel_for(0, static_cast<std::size_t>(nf), [&](std::size_t begin, std::size_t end) {
     for (std::size_t f = begin; f < end; ++f)
       for (int k = 0; k < 3; ++k) {
@@ -333,8 +344,42 @@ void SurfaceIndex::Impl::build_adjacency() {
       }
   }, 4096);
   parallel_sort(edges);
-  edge_boundary.assign(static_cast<std::size_t>(nf), 0);
+  return edges;
+}
+
+void SurfaceIndex::Impl::build_boundary() {
+  const int nf = mesh.face_count();
+  const Buffer<KeyedIndex> edges = sorted_edge_slots(mesh);
+  // A slot whose key neither neighbour shares is an edge of exactly one face.
+  Buffer<std::uint8_t> alone(edges.size());
+  parallel_for(0, edges.size(), [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i) {
+      const bool same_before = i > 0 && edges[i - 1].key == edges[i].key;
+      const bool same_after = i + 1 < edges.size() && edges[i + 1].key == edges[i].key;
+      alone[static_cast<std::size_t>(edges[i].index)] = !same_before && !same_after;
+    }
+  }, 4096);
+  edge_boundary = Buffer<std::uint8_t>(static_cast<std::size_t>(nf));
+  parallel_for(0, static_cast<std::size_t>(nf), [&](std::size_t begin, std::size_t end) {
+    for (std::size_t f = begin; f < end; ++f)
+      edge_boundary[f] = static_cast<std::uint8_t>(alone[3 * f] | (alone[3 * f + 1] << 1) | (alone[3 * f + 2] << 2));
+  }, 4096);
+  // The boundary's vertices: few faces have a boundary edge, so one pass on this thread.
   vertex_boundary.assign(static_cast<std::size_t>(mesh.vertex_count()), 0);
+  for (int f = 0; f < nf; ++f) {
+    const std::uint8_t bits = edge_boundary[static_cast<std::size_t>(f)];
+    if (!bits) continue;
+    for (int k = 0; k < 3; ++k)
+      if ((bits >> k) & 1u) {
+        vertex_boundary[static_cast<std::size_t>(mesh.F(f, k))] = 1;
+        vertex_boundary[static_cast<std::size_t>(mesh.F(f, (k + 1) % 3))] = 1;
+      }
+  }
+}
+
+void SurfaceIndex::Impl::build_subset_adjacency() {
+  const int nf = mesh.face_count();
+  const Buffer<KeyedIndex> edges = sorted_edge_slots(mesh);
   edge_start.clear();
   edge_slots.resize(edges.size());
   slot_edge.resize(edges.size());
@@ -346,13 +391,6 @@ void SurfaceIndex::Impl::build_adjacency() {
     for (std::size_t k = i; k < j; ++k) {
       edge_slots[k] = edges[k].index;
       slot_edge[static_cast<std::size_t>(edges[k].index)] = group;
-    }
-    if (j - i == 1) {  // an edge of exactly one face
-      const int f = edges[i].index / 3;
-      const int k = edges[i].index % 3;
-      edge_boundary[static_cast<std::size_t>(f)] |= static_cast<std::uint8_t>(1u << k);
-      vertex_boundary[static_cast<std::size_t>(mesh.F(f, k))] = 1;
-      vertex_boundary[static_cast<std::size_t>(mesh.F(f, (k + 1) % 3))] = 1;
     }
     i = j;
   }
@@ -651,7 +689,8 @@ SurfaceIndex::SurfaceIndex(const Mesh& mesh, QueryEngine engine, double reach)
       corners[f] = {mesh.V.row(mesh.F(fi, 0)), mesh.V.row(mesh.F(fi, 1)), mesh.V.row(mesh.F(fi, 2))};
     }
   }, 4096);
-  m.build_adjacency();
+  m.build_boundary();
+  if (m.engine == QueryEngine::kCells) m.build_subset_adjacency();
   if (m.engine == QueryEngine::kEmbree) {
     m.triangles.resize(corners.size());
     for (int f = 0; f < nf; ++f) {
@@ -748,7 +787,7 @@ void SurfaceIndex::Impl::build_tree(std::span<const Corners> corners, double pad
       face_position[static_cast<std::size_t>(order[i])] = static_cast<std::int32_t>(i);
     }
   }, 4096);
-  const std::vector<ObbLeaf>& leaves = tree.leaves();
+  const std::span<const ObbLeaf> leaves = tree.leaves();
   packs = Buffer<LeafPack>(leaves.size());
   parallel_for(0, leaves.size(), [&](std::size_t begin, std::size_t end) {
     for (std::size_t i = begin; i < end; ++i) {
@@ -834,6 +873,7 @@ std::vector<ClosestPoint> SurfaceIndex::closest_points_within(PointsRef queries,
   assert(face_mask.empty() || face_mask.size() == static_cast<std::size_t>(impl_->mesh.face_count()));
   if (max_distance > impl_->reach)
     throw std::logic_error("SurfaceIndex: a bounded query looks farther than the index's reach");
+  if (!face_mask.empty()) impl_->need_subset_adjacency();
   return impl_->batch(queries, {}, max_distance, face_mask.empty() ? nullptr : face_mask.data());
 }
 

@@ -168,10 +168,10 @@ TEST(ObbTree, SameTreeWhateverTheThreadCount) {
   {
     const ThreadLimit limit(1);
     const ObbTree tree(tri, 1e-12);
-    one = tree.nodes();
+    one.assign(tree.nodes().begin(), tree.nodes().end());
     one_order = tree.order();
-    one_wide = tree.wide_nodes();
-    one_leaves = tree.leaves();
+    one_wide.assign(tree.wide_nodes().begin(), tree.wide_nodes().end());
+    one_leaves.assign(tree.leaves().begin(), tree.leaves().end());
   }
   const ObbTree two(tri, 1e-12);
   ASSERT_EQ(two.nodes().size(), one.size());
@@ -198,7 +198,7 @@ TEST(ObbTree, SameTreeWhateverTheThreadCount) {
 TEST(ObbTree, WideNodesAndLeavesInPreOrder) {
   for (const int n : {40, 150}) {  // 3,200 and 45,000 triangles
     const ObbTree tree(corners_of(wavy_sheet(n)), 1e-12);
-    const std::vector<ObbWideNode>& wide = tree.wide_nodes();
+    const std::span<const ObbWideNode> wide = tree.wide_nodes();
     std::vector<int> parents(wide.size(), 0), leaf_parents(tree.leaves().size(), 0);
     for (std::size_t i = 0; i < wide.size(); ++i) {
       bool first_inner = true;

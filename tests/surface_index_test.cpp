@@ -451,6 +451,24 @@ TEST(SurfaceIndex, MaskedQueriesAnswerAsTheSubsetsOwnIndex) {
   }
 }
 
+// A box tree's first masked queries build what masks need (once, whichever thread asks
+// first): two threads asking at once on a fresh index get the answers one thread gets.
+TEST(SurfaceIndex, FirstMaskedQueriesFromTwoThreadsAtOnce) {
+  const Mesh m = perturbed_grid(87);
+  std::vector<char> mask(static_cast<std::size_t>(m.face_count()), 1);
+  for (std::size_t f = 0; f < mask.size(); f += 7) mask[f] = 0;
+  const Points Q = make_queries(m, 400, 89);
+  const SurfaceIndex reference(m);
+  const std::vector<ClosestPoint> expected = reference.closest_points_within(Q, 1e9, mask);
+  const SurfaceIndex fresh(m);
+  std::vector<ClosestPoint> got[2];
+  parallel_invoke_each(2, [&](std::size_t t) { got[t] = fresh.closest_points_within(Q, 1e9, mask); });
+  for (const auto& g : got) {
+    ASSERT_EQ(g.size(), expected.size());
+    for (std::size_t i = 0; i < g.size(); ++i) expect_same(g[i], expected[i]);
+  }
+}
+
 // The grid of cells answers a bounded query as the box tree does, bit for bit: at the reach
 // it was built for (a face at exactly that distance included), nearer, with and without a face
 // mask, on surfaces, soups, slivers far from the origin and exact ties.
