@@ -125,12 +125,20 @@ void unpack(const Layout& lay, const VecX& x, Points* A, Points* B, VecX* c) {
 
 // Per-t_i contribution to JᵀJ and Jᵀr in local coordinates [A_f..A_f+3, B_f..B_f+3] (24)
 // and the profile (nc).
+// The profile parts have at most kSplineProfileCoefficients columns: fixed-capacity storage,
+// so that a row block (and each sample's terms) costs no heap allocation. Allocations in this
+// parallel loop, 3000 per evaluation, held the two threads up on the allocator.
+using ProfileRow3 = Eigen::Matrix<double, 3, Eigen::Dynamic, Eigen::ColMajor, 3, kSplineProfileCoefficients>;
+using ProfileSquare = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::ColMajor,
+                                    kSplineProfileCoefficients, kSplineProfileCoefficients>;
+using ProfileVec = Eigen::Matrix<double, Eigen::Dynamic, 1, Eigen::ColMajor, kSplineProfileCoefficients, 1>;
+
 struct RowBlock {
   Eigen::Matrix3d Maa, Mab, Mbb;
-  MatX Ca, Cb;  // 3 by nc
-  MatX Hcc;     // nc by nc
+  ProfileRow3 Ca, Cb;  // 3 by nc
+  ProfileSquare Hcc;   // nc by nc
   Vec3 ga, gb;
-  VecX gc;
+  ProfileVec gc;
   double cost = 0.0;
   int interior = 0;
 };
@@ -138,6 +146,7 @@ struct RowBlock {
 Evaluation evaluate(Problem& pb, const VecX& x, std::vector<int>& hints, FitTiming& timing) {
   const Layout& lay = pb.layout;
   const int m = pb.m(), n = pb.n(), nc = lay.nc;
+  assert(nc <= kSplineProfileCoefficients);
   Points A, B;
   VecX c;
   unpack(lay, x, &A, &B, &c);
@@ -168,9 +177,9 @@ Evaluation evaluate(Problem& pb, const VecX& x, std::vector<int>& hints, FitTimi
       const int i = static_cast<int>(ii);
       RowBlock& rb = blocks[ii];
       rb.Maa.setZero(), rb.Mab.setZero(), rb.Mbb.setZero();
-      rb.Ca = MatX::Zero(3, nc), rb.Cb = MatX::Zero(3, nc), rb.Hcc = MatX::Zero(nc, nc);
+      rb.Ca = ProfileRow3::Zero(3, nc), rb.Cb = ProfileRow3::Zero(3, nc), rb.Hcc = ProfileSquare::Zero(nc, nc);
       rb.ga.setZero(), rb.gb.setZero();
-      rb.gc = VecX::Zero(nc);
+      rb.gc = ProfileVec::Zero(nc);
       for (int j = 0; j < n; ++j) {
         const ClosestPoint& f = cp[static_cast<std::size_t>(i * n + j)];
         if (f.boundary || f.face < 0) continue;  // beyond Φ: no proximity information
@@ -188,9 +197,11 @@ Evaluation evaluate(Problem& pb, const VecX& x, std::vector<int>& hints, FitTimi
         const double sa = 1.0 - pb.s[j], sb = pb.s[j];
         rb.Maa += sa * sa * M, rb.Mab += sa * sb * M, rb.Mbb += sb * sb * M;
         const auto Pj = pb.P.row(j);
-        const MatX Hpc = -(pb.W1 + pb.W3) * nn * Pj;
+        // noalias: the outer products are written in place, with the same roundings.
+        ProfileRow3 Hpc(3, nc);
+        Hpc.noalias() = -(pb.W1 + pb.W3) * nn * Pj;
         rb.Ca += sa * Hpc, rb.Cb += sb * Hpc;
-        rb.Hcc += (pb.W1 + pb.W3) * Pj.transpose() * Pj;
+        rb.Hcc.noalias() += (pb.W1 + pb.W3) * Pj.transpose() * Pj;
         const Vec3 gp = (pb.W1 * rho + pb.W3 * nn.dot(qv)) * nn;
         rb.ga += sa * gp, rb.gb += sb * gp;
         rb.gc -= (pb.W1 * rho + pb.W3 * nn.dot(qv)) * Pj.transpose();
