@@ -214,40 +214,58 @@ Evaluation evaluate(Problem& pb, const VecX& x, std::vector<int>& hints, FitTimi
       rb.ga += 2.0 * pb.W4 * r * e, rb.gb -= 2.0 * pb.W4 * r * e;
       rb.cost += pb.W4 * r * r;
     }
-  });
+  }, 4);  // rows differ in cost (samples beyond Φ are skipped): small chunks balance them
 
   Evaluation ev;
   const int N = lay.n();
   // Fairness acts on the update δ (W2 |D δ|², see FitOptions): it adds to JᵀJ only.
   ev.H = pb.fair_active ? pb.H_fair : MatX::Zero(N, N);
   ev.g = VecX::Zero(N);
-  // Serial reduction in i order: the result does not depend on the thread count.
-  for (int i = 0; i < m; ++i) {
-    const RowBlock& rb = blocks[static_cast<std::size_t>(i)];
-    const BasisRow& br = pb.rows[i];
-    ev.cost += rb.cost;
-    ev.interior += rb.interior;
-    for (int k = 0; k <= kSplineDegree; ++k) {
-      const int ka = lay.a(br.first + k), kb = lay.b(br.first + k);
-      const double Nk = br.value[k];
-      for (int l = 0; l <= kSplineDegree; ++l) {
-        const int la = lay.a(br.first + l), lb = lay.b(br.first + l);
-        const double NkNl = Nk * br.value[l];
-        ev.H.block<3, 3>(ka, la) += NkNl * rb.Maa;
-        ev.H.block<3, 3>(ka, lb) += NkNl * rb.Mab;
-        ev.H.block<3, 3>(kb, la) += NkNl * rb.Mab.transpose();
-        ev.H.block<3, 3>(kb, lb) += NkNl * rb.Mbb;
+  for (const RowBlock& rb : blocks) ev.cost += rb.cost, ev.interior += rb.interior;
+  // The blocks summed into JᵀJ and Jᵀr concurrently, each task owning rows of H and g: control
+  // point k's six (its a and b), or the profile's nc. Every element still receives its terms
+  // in i order, as one loop over i would add them: the sums are the same bits whatever the
+  // thread count.
+  const int K = lay.K;
+  parallel_for(0, static_cast<std::size_t>(K) + 1, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t task = begin; task < end; ++task) {
+      if (task < static_cast<std::size_t>(K)) {
+        const int k = static_cast<int>(task);
+        const int ka = lay.a(k), kb = lay.b(k);
+        for (int i = 0; i < m; ++i) {
+          const BasisRow& br = pb.rows[i];
+          const int kk = k - br.first;
+          if (kk < 0 || kk > kSplineDegree) continue;
+          const RowBlock& rb = blocks[static_cast<std::size_t>(i)];
+          const double Nk = br.value[kk];
+          for (int l = 0; l <= kSplineDegree; ++l) {
+            const int la = lay.a(br.first + l), lb = lay.b(br.first + l);
+            const double NkNl = Nk * br.value[l];
+            ev.H.block<3, 3>(ka, la) += NkNl * rb.Maa;
+            ev.H.block<3, 3>(ka, lb) += NkNl * rb.Mab;
+            ev.H.block<3, 3>(kb, la) += NkNl * rb.Mab.transpose();
+            ev.H.block<3, 3>(kb, lb) += NkNl * rb.Mbb;
+          }
+          ev.H.block(ka, lay.c(0), 3, nc) += Nk * rb.Ca;
+          ev.H.block(kb, lay.c(0), 3, nc) += Nk * rb.Cb;
+          ev.g.segment<3>(ka) += Nk * rb.ga;
+          ev.g.segment<3>(kb) += Nk * rb.gb;
+        }
+      } else {
+        for (int i = 0; i < m; ++i) {
+          const BasisRow& br = pb.rows[i];
+          const RowBlock& rb = blocks[static_cast<std::size_t>(i)];
+          for (int k = 0; k <= kSplineDegree; ++k) {
+            const double Nk = br.value[k];
+            ev.H.block(lay.c(0), lay.a(br.first + k), nc, 3) += Nk * rb.Ca.transpose();
+            ev.H.block(lay.c(0), lay.b(br.first + k), nc, 3) += Nk * rb.Cb.transpose();
+          }
+          ev.H.block(lay.c(0), lay.c(0), nc, nc) += rb.Hcc;
+          ev.g.segment(lay.c(0), nc) += rb.gc;
+        }
       }
-      ev.H.block(ka, lay.c(0), 3, nc) += Nk * rb.Ca;
-      ev.H.block(kb, lay.c(0), 3, nc) += Nk * rb.Cb;
-      ev.H.block(lay.c(0), ka, nc, 3) += Nk * rb.Ca.transpose();
-      ev.H.block(lay.c(0), kb, nc, 3) += Nk * rb.Cb.transpose();
-      ev.g.segment<3>(ka) += Nk * rb.ga;
-      ev.g.segment<3>(kb) += Nk * rb.gb;
     }
-    ev.H.block(lay.c(0), lay.c(0), nc, nc) += rb.Hcc;
-    ev.g.segment(lay.c(0), nc) += rb.gc;
-  }
+  }, 1);
   timing.assembly_s += seconds_since(t0);
   return ev;
 }
