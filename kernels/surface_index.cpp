@@ -262,6 +262,29 @@ Vec3 closest_point_on_triangle(const Vec3& p, const Vec3& a, const Vec3& b, cons
   return q;
 }
 
+namespace {
+
+// Every edge slot (3 f + k: edge (k, k + 1 mod 3) of face f) keyed by its vertex pair, sorted:
+// the slots of one edge are adjacent.
+Buffer<KeyedIndex> sorted_edge_slots(const Mesh& mesh) {
+  const int nf = mesh.face_count();
+  Buffer<KeyedIndex> edges(static_cast<std::size_t>(nf) * 3);
+  parallel_for(0, static_cast<std::size_t>(nf), [&](std::size_t begin, std::size_t end) {
+    for (std::size_t f = begin; f < end; ++f)
+      for (int k = 0; k < 3; ++k) {
+        const auto fi = static_cast<Eigen::Index>(f);
+        const auto u = static_cast<std::uint32_t>(mesh.F(fi, k));
+        const auto v = static_cast<std::uint32_t>(mesh.F(fi, (k + 1) % 3));
+        const std::uint64_t key = (std::uint64_t{std::min(u, v)} << 32) | std::max(u, v);
+        edges[3 * f + static_cast<std::size_t>(k)] = {key, static_cast<std::int32_t>(3 * f) + k};
+      }
+  }, 4096);
+  parallel_sort(edges);
+  return edges;
+}
+
+}  // namespace
+
 struct SurfaceIndex::Impl {
   Mesh mesh;
   Points normals;
@@ -306,13 +329,13 @@ struct SurfaceIndex::Impl {
                              ")");
   }
 
-  // edge_boundary and vertex_boundary.
-  void build_boundary();
+  // edge_boundary and vertex_boundary, from sorted_edge_slots(mesh).
+  void build_boundary(std::span<const KeyedIndex> edges);
   // What masked queries need beyond them (edge_start … vertex_faces): built for the index
   // made by within_reach, whose queries are masked, and otherwise on the first masked query.
-  void build_subset_adjacency();
+  void build_subset_adjacency(std::span<const KeyedIndex> edges);
   void need_subset_adjacency() const {
-    std::call_once(subset_once, [this] { const_cast<Impl*>(this)->build_subset_adjacency(); });
+    std::call_once(subset_once, [this] { const_cast<Impl*>(this)->build_subset_adjacency(sorted_edge_slots(mesh)); });
   }
   bool masked_edge_boundary(int group, const char* mask) const;
   bool masked_on_boundary(int f, int region, const char* mask) const;
@@ -328,28 +351,9 @@ struct SurfaceIndex::Impl {
                                   const char* mask) const;
 };
 
-// Every edge slot (3 f + k: edge (k, k + 1 mod 3) of face f) keyed by its vertex pair, sorted:
-// the slots of one edge are adjacent.
-Buffer<KeyedIndex> sorted_edge_slots(const Mesh& mesh) {
-  const int nf = mesh.face_count();
-  Buffer<KeyedIndex> edges(static_cast<std::size_t>(nf) * 3);
-  parallel_for(0, static_cast<std::size_t>(nf), [&](std::size_t begin, std::size_t end) {
-    for (std::size_t f = begin; f < end; ++f)
-      for (int k = 0; k < 3; ++k) {
-        const auto fi = static_cast<Eigen::Index>(f);
-        const auto u = static_cast<std::uint32_t>(mesh.F(fi, k));
-        const auto v = static_cast<std::uint32_t>(mesh.F(fi, (k + 1) % 3));
-        const std::uint64_t key = (std::uint64_t{std::min(u, v)} << 32) | std::max(u, v);
-        edges[3 * f + static_cast<std::size_t>(k)] = {key, static_cast<std::int32_t>(3 * f) + k};
-      }
-  }, 4096);
-  parallel_sort(edges);
-  return edges;
-}
 
-void SurfaceIndex::Impl::build_boundary() {
+void SurfaceIndex::Impl::build_boundary(std::span<const KeyedIndex> edges) {
   const int nf = mesh.face_count();
-  const Buffer<KeyedIndex> edges = sorted_edge_slots(mesh);
   // A slot whose key neither neighbour shares is an edge of exactly one face.
   Buffer<std::uint8_t> alone(edges.size());
   parallel_for(0, edges.size(), [&](std::size_t begin, std::size_t end) {
@@ -377,9 +381,8 @@ void SurfaceIndex::Impl::build_boundary() {
   }
 }
 
-void SurfaceIndex::Impl::build_subset_adjacency() {
+void SurfaceIndex::Impl::build_subset_adjacency(std::span<const KeyedIndex> edges) {
   const int nf = mesh.face_count();
-  const Buffer<KeyedIndex> edges = sorted_edge_slots(mesh);
   edge_start.clear();
   edge_slots.resize(edges.size());
   slot_edge.resize(edges.size());
@@ -689,8 +692,11 @@ SurfaceIndex::SurfaceIndex(const Mesh& mesh, QueryEngine engine, double reach)
       corners[f] = {mesh.V.row(mesh.F(fi, 0)), mesh.V.row(mesh.F(fi, 1)), mesh.V.row(mesh.F(fi, 2))};
     }
   }, 4096);
-  m.build_boundary();
-  if (m.engine == QueryEngine::kCells) m.build_subset_adjacency();
+  {
+    const Buffer<KeyedIndex> edges = sorted_edge_slots(mesh);
+    m.build_boundary(edges);
+    if (m.engine == QueryEngine::kCells) m.build_subset_adjacency(edges);
+  }
   if (m.engine == QueryEngine::kEmbree) {
     m.triangles.resize(corners.size());
     for (int f = 0; f < nf; ++f) {
