@@ -331,11 +331,14 @@ struct SurfaceIndex::Impl {
 
   // edge_boundary and vertex_boundary, from sorted_edge_slots(mesh).
   void build_boundary(std::span<const KeyedIndex> edges);
-  // What masked queries need beyond them (edge_start … vertex_faces): built for the index
-  // made by within_reach, whose queries are masked, and otherwise on the first masked query.
-  void build_subset_adjacency(std::span<const KeyedIndex> edges);
+  // What masked queries need beyond them (edge_start … vertex_faces), and with_boundary the
+  // boundary flags too, in the same serial pass: for the index made by within_reach, small
+  // and built for every patch judged, whose queries are masked; otherwise built on the first
+  // masked query.
+  void build_subset_adjacency(std::span<const KeyedIndex> edges, bool with_boundary);
   void need_subset_adjacency() const {
-    std::call_once(subset_once, [this] { const_cast<Impl*>(this)->build_subset_adjacency(sorted_edge_slots(mesh)); });
+    std::call_once(subset_once,
+                   [this] { const_cast<Impl*>(this)->build_subset_adjacency(sorted_edge_slots(mesh), false); });
   }
   bool masked_edge_boundary(int group, const char* mask) const;
   bool masked_on_boundary(int f, int region, const char* mask) const;
@@ -381,8 +384,13 @@ void SurfaceIndex::Impl::build_boundary(std::span<const KeyedIndex> edges) {
   }
 }
 
-void SurfaceIndex::Impl::build_subset_adjacency(std::span<const KeyedIndex> edges) {
+void SurfaceIndex::Impl::build_subset_adjacency(std::span<const KeyedIndex> edges, bool with_boundary) {
   const int nf = mesh.face_count();
+  if (with_boundary) {
+    edge_boundary = Buffer<std::uint8_t>(static_cast<std::size_t>(nf));
+    std::fill(edge_boundary.begin(), edge_boundary.end(), std::uint8_t{0});
+    vertex_boundary.assign(static_cast<std::size_t>(mesh.vertex_count()), 0);
+  }
   edge_start.clear();
   edge_slots.resize(edges.size());
   slot_edge.resize(edges.size());
@@ -394,6 +402,13 @@ void SurfaceIndex::Impl::build_subset_adjacency(std::span<const KeyedIndex> edge
     for (std::size_t k = i; k < j; ++k) {
       edge_slots[k] = edges[k].index;
       slot_edge[static_cast<std::size_t>(edges[k].index)] = group;
+    }
+    if (with_boundary && j - i == 1) {  // an edge of exactly one face
+      const int f = edges[i].index / 3;
+      const int k = edges[i].index % 3;
+      edge_boundary[static_cast<std::size_t>(f)] |= static_cast<std::uint8_t>(1u << k);
+      vertex_boundary[static_cast<std::size_t>(mesh.F(f, k))] = 1;
+      vertex_boundary[static_cast<std::size_t>(mesh.F(f, (k + 1) % 3))] = 1;
     }
     i = j;
   }
@@ -694,8 +709,10 @@ SurfaceIndex::SurfaceIndex(const Mesh& mesh, QueryEngine engine, double reach)
   }, 4096);
   {
     const Buffer<KeyedIndex> edges = sorted_edge_slots(mesh);
-    m.build_boundary(edges);
-    if (m.engine == QueryEngine::kCells) m.build_subset_adjacency(edges);
+    if (m.engine == QueryEngine::kCells)  // through the flag, so that masked queries find it done
+      std::call_once(m.subset_once, [&] { m.build_subset_adjacency(edges, true); });
+    else
+      m.build_boundary(edges);
   }
   if (m.engine == QueryEngine::kEmbree) {
     m.triangles.resize(corners.size());
