@@ -23,22 +23,49 @@ constexpr int kLeafItems = ObbTree::kMaxLeafItems;
 // item count alone), so a split costs a task, not a copy.
 constexpr int kParallelItems = 1024;
 
-// The node count of the subtree over n items (median splits down to kLeafItems), for every
-// n the tree meets: two per level, filled before the build and only read during it.
+// What the subtree over n items (median splits down to kLeafItems) holds, for every n the
+// tree meets (two per level), filled before the build and only read during it: its binary
+// nodes, and the wide nodes and leaves it collapses into. All depend on n alone, so every
+// subtree's range of each list is known before it is built.
 class SubtreeSizes {
  public:
+  struct Counts {
+    std::int32_t nodes = 1, wide = 0, leaves = 1;  // a leaf's
+  };
   explicit SubtreeSizes(int n) { fill(n); }
-  std::int32_t operator()(int n) const { return n <= kLeafItems ? 1 : nodes_.at(n); }
+  Counts operator()(int n) const { return n <= kLeafItems ? Counts{} : counts_.at(n); }
 
- private:
-  std::int32_t fill(int n) {
-    if (n <= kLeafItems) return 1;
-    if (const auto it = nodes_.find(n); it != nodes_.end()) return it->second;
-    const std::int32_t count = 1 + fill(n / 2) + fill(n - n / 2);
-    nodes_.emplace(n, count);
+  // The item counts of the lanes of the wide node made from a binary node over n > kLeafItems
+  // items: each child, or where it is inner, its two children. Returns the lane count.
+  static int lanes(int n, int* out) {
+    int count = 0;
+    for (const int c : {n / 2, n - n / 2}) {
+      if (c <= kLeafItems) {
+        out[count++] = c;
+      } else {
+        out[count++] = c / 2;
+        out[count++] = c - c / 2;
+      }
+    }
     return count;
   }
-  std::map<int, std::int32_t> nodes_;
+
+ private:
+  Counts fill(int n) {
+    if (n <= kLeafItems) return {};
+    if (const auto it = counts_.find(n); it != counts_.end()) return it->second;
+    Counts c{1 + fill(n / 2).nodes + fill(n - n / 2).nodes, 1, 0};
+    int lane_items[ObbWideNode::kLanes];
+    const int count = lanes(n, lane_items);
+    for (int l = 0; l < count; ++l) {
+      const Counts sub = fill(lane_items[l]);
+      c.wide += sub.wide;
+      c.leaves += sub.leaves;
+    }
+    counts_.emplace(n, c);
+    return c;
+  }
+  std::map<int, Counts> counts_;
 };
 
 // First and second moments of a triangle's corners, relative to the bounding box's centre
@@ -104,8 +131,8 @@ struct Builder {
     return node;
   }
 
-  // Writes the subtree of items[begin, end) in pre-order from `self` on (sizes(end - begin)
-  // nodes); `keys` is scratch.
+  // Writes the subtree of items[begin, end) in pre-order from `self` on
+  // (sizes(end - begin).nodes nodes); `keys` is scratch.
   void build(ObbNode* self, int begin, int end, std::vector<std::pair<double, int>>& keys) const {
     *self = box(begin, end);
     if (end - begin <= kLeafItems) {
@@ -126,7 +153,7 @@ struct Builder {
     }
     std::nth_element(keys.begin(), keys.begin() + (mid - begin), keys.end());
     for (int i = begin; i < end; ++i) items[static_cast<std::size_t>(i)] = keys[static_cast<std::size_t>(i - begin)].second;
-    self->right = 1 + sizes(mid - begin);
+    self->right = 1 + sizes(mid - begin).nodes;
     ObbNode* left = self + 1;
     ObbNode* right = self + self->right;
     if (end - begin <= kParallelItems) {
@@ -150,60 +177,16 @@ float round_up(double x) {
   return std::nextafter(static_cast<float>(x), std::numeric_limits<float>::infinity());
 }
 
-// The wide nodes and leaves of the collapsed subtree of a binary node over n items, for every
-// n the tree meets: like the binary subtree's size, they depend on n alone, so that each
-// lane's part of the wide-node and leaf lists is known before it is built.
-class WideSizes {
- public:
-  struct Counts {
-    std::int32_t wide = 0, leaves = 0;
-  };
-  explicit WideSizes(int n) { fill(n); }
-  Counts operator()(int n) const { return n <= kLeafItems ? Counts{0, 1} : counts_.at(n); }
-
-  // The item counts of the lanes of a wide node made from a binary node over n > kLeafItems
-  // items: each child, or where it is inner, its two children. Returns the lane count.
-  static int lanes(int n, int* out) {
-    int count = 0;
-    for (const int c : {n / 2, n - n / 2}) {
-      if (c <= kLeafItems) {
-        out[count++] = c;
-      } else {
-        out[count++] = c / 2;
-        out[count++] = c - c / 2;
-      }
-    }
-    return count;
-  }
-
- private:
-  Counts fill(int n) {
-    if (n <= kLeafItems) return {0, 1};
-    if (const auto it = counts_.find(n); it != counts_.end()) return it->second;
-    int lane_items[ObbWideNode::kLanes];
-    const int count = lanes(n, lane_items);
-    Counts c{1, 0};
-    for (int l = 0; l < count; ++l) {
-      const Counts sub = fill(lane_items[l]);
-      c.wide += sub.wide;
-      c.leaves += sub.leaves;
-    }
-    counts_.emplace(n, c);
-    return c;
-  }
-  std::map<int, Counts> counts_;
-};
-
 // Collapses the binary tree into nodes of up to four children (ObbWideNode), in pre-order:
 // a wide node, then its lanes' subtrees in lane order; leaves in the order they are met.
-// Each lane's range of both lists is known in advance (WideSizes), so large subtrees are
+// Each lane's range of both lists is known in advance (SubtreeSizes), so large subtrees are
 // collapsed concurrently into their own ranges.
 struct Collapser {
   std::span<const ObbNode> nodes;
   Vec3 origin;
   std::span<ObbWideNode> wide;
   std::span<ObbLeaf> leaves;
-  const WideSizes& sizes;
+  const SubtreeSizes& sizes;
 
   // The lane code of binary node n over `items` items: a leaf's (negative, written at
   // leaves[leaf]) or the index of the wide node written at wide[index].
@@ -254,7 +237,7 @@ struct Collapser {
       }
     }
     int lane_items[ObbWideNode::kLanes];
-    [[maybe_unused]] const int lane_count = WideSizes::lanes(items, lane_items);
+    [[maybe_unused]] const int lane_count = SubtreeSizes::lanes(items, lane_items);
     assert(lane_count == count);
     ObbWideNode w{};
     w.count = count;
@@ -269,7 +252,7 @@ struct Collapser {
       }
       set_half(w, l, box);
       first_index[l] = next_index, first_leaf[l] = next_leaf;
-      const WideSizes::Counts sub = sizes(lane_items[l]);
+      const SubtreeSizes::Counts sub = sizes(lane_items[l]);
       next_index += sub.wide, next_leaf += sub.leaves;
     }
     const auto collapse = [&](std::size_t l) {
@@ -312,17 +295,16 @@ ObbTree::ObbTree(std::span<const std::array<Vec3, 3>> triangles, double pad) {
       b.moments[f] = m;
     }
   }, 4096);
-  nodes_ = Buffer<ObbNode>(static_cast<std::size_t>(sizes(count)));
+  const SubtreeSizes::Counts total = sizes(count);
+  nodes_ = Buffer<ObbNode>(static_cast<std::size_t>(total.nodes));
   std::vector<std::pair<double, int>> keys;
   b.build(nodes_.data(), 0, count, keys);
 
   origin_ = b.origin;
   scale_ = 0.5 * (hi - lo).norm();
-  const WideSizes wide_sizes(count);
-  const WideSizes::Counts total = wide_sizes(count);
   wide_ = Buffer<ObbWideNode>(static_cast<std::size_t>(total.wide));
   leaves_ = Buffer<ObbLeaf>(static_cast<std::size_t>(total.leaves));
-  Collapser c{nodes_, origin_, wide_, leaves_, wide_sizes};
+  Collapser c{nodes_, origin_, wide_, leaves_, sizes};
   c.lane(0, count, 0, 0);
 }
 

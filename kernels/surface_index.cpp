@@ -336,6 +336,11 @@ struct SurfaceIndex::Impl {
   // and built for every patch judged, whose queries are masked; otherwise built on the first
   // masked query.
   void build_subset_adjacency(std::span<const KeyedIndex> edges, bool with_boundary);
+  // Both ends of edge k of face f are on the boundary.
+  void mark_boundary_vertices(int f, int k) {
+    vertex_boundary[static_cast<std::size_t>(mesh.F(f, k))] = 1;
+    vertex_boundary[static_cast<std::size_t>(mesh.F(f, (k + 1) % 3))] = 1;
+  }
   void need_subset_adjacency() const {
     std::call_once(subset_once,
                    [this] { const_cast<Impl*>(this)->build_subset_adjacency(sorted_edge_slots(mesh), false); });
@@ -353,7 +358,6 @@ struct SurfaceIndex::Impl {
   std::vector<ClosestPoint> batch(PointsRef queries, std::span<const int> hints, double max_distance,
                                   const char* mask) const;
 };
-
 
 void SurfaceIndex::Impl::build_boundary(std::span<const KeyedIndex> edges) {
   const int nf = mesh.face_count();
@@ -377,10 +381,7 @@ void SurfaceIndex::Impl::build_boundary(std::span<const KeyedIndex> edges) {
     const std::uint8_t bits = edge_boundary[static_cast<std::size_t>(f)];
     if (!bits) continue;
     for (int k = 0; k < 3; ++k)
-      if ((bits >> k) & 1u) {
-        vertex_boundary[static_cast<std::size_t>(mesh.F(f, k))] = 1;
-        vertex_boundary[static_cast<std::size_t>(mesh.F(f, (k + 1) % 3))] = 1;
-      }
+      if ((bits >> k) & 1u) mark_boundary_vertices(f, k);
   }
 }
 
@@ -407,8 +408,7 @@ void SurfaceIndex::Impl::build_subset_adjacency(std::span<const KeyedIndex> edge
       const int f = edges[i].index / 3;
       const int k = edges[i].index % 3;
       edge_boundary[static_cast<std::size_t>(f)] |= static_cast<std::uint8_t>(1u << k);
-      vertex_boundary[static_cast<std::size_t>(mesh.F(f, k))] = 1;
-      vertex_boundary[static_cast<std::size_t>(mesh.F(f, (k + 1) % 3))] = 1;
+      mark_boundary_vertices(f, k);
     }
     i = j;
   }

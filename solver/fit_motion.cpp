@@ -123,16 +123,16 @@ void unpack(const Layout& lay, const VecX& x, Points* A, Points* B, VecX* c) {
   *c = x.tail(lay.nc);
 }
 
-// Per-t_i contribution to JᵀJ and Jᵀr in local coordinates [A_f..A_f+3, B_f..B_f+3] (24)
-// and the profile (nc).
 // The profile parts have at most kSplineProfileCoefficients columns: fixed-capacity storage,
-// so that a row block (and each sample's terms) costs no heap allocation. Allocations in this
-// parallel loop, 3000 per evaluation, held the two threads up on the allocator.
+// so that a row block (and each sample's terms) costs no heap allocation. Allocations in the
+// parallel row loop, 3000 per evaluation, held the two threads up on the allocator.
 using ProfileRow3 = Eigen::Matrix<double, 3, Eigen::Dynamic, Eigen::ColMajor, 3, kSplineProfileCoefficients>;
 using ProfileSquare = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::ColMajor,
                                     kSplineProfileCoefficients, kSplineProfileCoefficients>;
 using ProfileVec = Eigen::Matrix<double, Eigen::Dynamic, 1, Eigen::ColMajor, kSplineProfileCoefficients, 1>;
 
+// Per-t_i contribution to JᵀJ and Jᵀr in local coordinates [A_f..A_f+3, B_f..B_f+3] (24)
+// and the profile (nc).
 struct RowBlock {
   Eigen::Matrix3d Maa, Mab, Mbb;
   ProfileRow3 Ca, Cb;  // 3 by nc
