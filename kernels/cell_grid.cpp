@@ -31,16 +31,38 @@ std::int64_t CellGrid::coordinate(double x, int k) const {
   return static_cast<std::int64_t>(t);
 }
 
+void CellGrid::range_of(const Vec3& lo, const Vec3& hi, std::int64_t* r) const {
+  for (int k = 0; k < 3; ++k) {
+    r[k] = coordinate(lo[k], k);
+    r[3 + k] = coordinate(hi[k], k);
+    assert(r[k] >= 0 && r[3 + k] >= r[k]);
+  }
+}
+
 std::size_t CellGrid::probe(std::uint64_t key) const {
   std::uint64_t s = (key * 0x9E3779B97F4A7C15ull) >> shift_;  // Fibonacci hashing
-  while (keys_[s] != key && keys_[s] != kEmpty) s = (s + 1) & mask_;
+  while (table_[s].key != key && table_[s].key != kEmpty) s = (s + 1) & mask_;
   return static_cast<std::size_t>(s);
 }
 
-std::int64_t CellGrid::slot_of(std::uint64_t key) const {
-  if (keys_.empty()) return -1;
-  const std::size_t s = probe(key);
-  return keys_[s] == key ? static_cast<std::int64_t>(s) : -1;
+void CellGrid::resize_table(std::size_t capacity) {
+  std::vector<Slot> old = std::move(table_);
+  table_.assign(capacity, Slot{kEmpty, -1});
+  mask_ = capacity - 1;
+  shift_ = 64 - std::countr_zero(capacity);
+  for (const Slot& s : old)
+    if (s.key != kEmpty) table_[probe(s.key)] = s;
+}
+
+std::int32_t CellGrid::cell_of(std::uint64_t key) {
+  std::size_t s = probe(key);
+  if (table_[s].key == key) return table_[s].cell;
+  if (2 * (cells_ + 1) > table_.size()) {
+    resize_table(2 * table_.size());
+    s = probe(key);
+  }
+  table_[s] = {key, static_cast<std::int32_t>(cells_++)};
+  return table_[s].cell;
 }
 
 CellGrid::CellGrid(std::span<const Vec3> lo, std::span<const Vec3> hi) {
@@ -59,64 +81,63 @@ CellGrid::CellGrid(std::span<const Vec3> lo, std::span<const Vec3> hi) {
   cell_ = std::max(side[n / 2], extent.maxCoeff() / static_cast<double>(kMaxDim - 2));
   if (!(cell_ > 0.0)) cell_ = 1.0;  // every box one and the same point
 
-  // Each item's cell ranges; doubling the cells while the boxes span too many.
-  std::vector<std::array<std::int64_t, 6>> range(n);
+  // The cell size, doubled while the boxes span too many cells.
   double pairs = 0.0;  // (item, cell): counted in double, a too small cell may overflow
+  std::int64_t r[6];
   for (;;) {
     inverse_ = 1.0 / cell_;
     for (int k = 0; k < 3; ++k) dims_[k] = static_cast<std::int64_t>((ghi[k] - origin_[k]) * inverse_) + 1;
     pairs = 0.0;
     for (std::size_t i = 0; i < n; ++i) {
-      double cells = 1.0;
-      for (int k = 0; k < 3; ++k) {
-        range[i][k] = coordinate(lo[i][k], k);
-        range[i][3 + k] = coordinate(hi[i][k], k);
-        assert(range[i][k] >= 0 && range[i][3 + k] >= range[i][k]);
-        cells *= static_cast<double>(range[i][3 + k] - range[i][k] + 1);
-      }
-      pairs += cells;
+      range_of(lo[i], hi[i], r);
+      pairs += static_cast<double>(r[3] - r[0] + 1) * static_cast<double>(r[4] - r[1] + 1) *
+               static_cast<double>(r[5] - r[2] + 1);
     }
     if (pairs <= kMaxPairsPerItem * static_cast<double>(n) + 64.0) break;
     cell_ *= 2.0;
   }
 
-  // Occupied cells in an open-addressing table of at least twice as many slots as pairs;
-  // counted, then filled in item order.
+  // The occupied cells, numbered in item order, and their item counts; then each cell's items
+  // in item order. Neighbouring boxes share most of their cells, so the table is sized by
+  // the cells met, not by the pairs (a table per pair was most of the cost of the index).
   const auto total = static_cast<std::size_t>(pairs);  // exact: at most 16 per item here
-  const std::size_t capacity = std::bit_ceil(std::max<std::size_t>(2 * total, 16));
-  mask_ = capacity - 1;
-  shift_ = 64 - std::countr_zero(capacity);
-  keys_.assign(capacity, kEmpty);
-  std::vector<std::int32_t> count(capacity, 0);
-  auto insert = [&](std::uint64_t key) {
-    const std::size_t s = probe(key);
-    if (keys_[s] == kEmpty) keys_[s] = key, ++cells_;
-    return s;
-  };
-  auto for_cells = [&](const std::array<std::int64_t, 6>& r, auto&& f) {
+  resize_table(std::bit_ceil(std::max<std::size_t>(total / 4, 16)));
+  std::vector<std::int32_t> count;
+  const auto for_cells = [&](auto&& f) {
     for (std::int64_t z = r[2]; z <= r[5]; ++z)
       for (std::int64_t y = r[1]; y <= r[4]; ++y)
         for (std::int64_t x = r[0]; x <= r[3]; ++x) f(key_of(x, y, z));
   };
-  for (std::size_t i = 0; i < n; ++i) for_cells(range[i], [&](std::uint64_t key) { ++count[insert(key)]; });
-  start_.assign(capacity + 1, 0);
-  for (std::size_t s = 0; s < capacity; ++s) start_[s + 1] = start_[s] + count[s];
-  items_.resize(total);
-  std::vector<std::int32_t> fill(start_.begin(), start_.end() - 1);
-  for (std::size_t i = 0; i < n; ++i)
-    for_cells(range[i], [&](std::uint64_t key) {
-      const auto s = static_cast<std::size_t>(slot_of(key));
-      items_[static_cast<std::size_t>(fill[s]++)] = static_cast<std::int32_t>(i);
+  for (std::size_t i = 0; i < n; ++i) {
+    range_of(lo[i], hi[i], r);
+    for_cells([&](std::uint64_t key) {
+      const auto c = static_cast<std::size_t>(cell_of(key));
+      if (c == count.size()) count.push_back(0);
+      ++count[c];
     });
+  }
+  start_.resize(cells_ + 1);
+  start_[0] = 0;
+  for (std::size_t c = 0; c < cells_; ++c) start_[c + 1] = start_[c] + count[c];
+  items_.resize(total);
+  for (std::size_t c = 0; c < cells_; ++c) count[c] = start_[c];  // now each cell's next place
+  for (std::size_t i = 0; i < n; ++i) {
+    range_of(lo[i], hi[i], r);
+    for_cells([&](std::uint64_t key) {
+      const std::size_t s = probe(key);
+      assert(table_[s].key == key);
+      items_[static_cast<std::size_t>(count[static_cast<std::size_t>(table_[s].cell)]++)] = static_cast<std::int32_t>(i);
+    });
+  }
 }
 
 std::span<const std::int32_t> CellGrid::items_at(const Vec3& p) const {
   const std::int64_t x = coordinate(p.x(), 0), y = coordinate(p.y(), 1), z = coordinate(p.z(), 2);
-  if (x < 0 || y < 0 || z < 0) return {};
-  const std::int64_t s = slot_of(key_of(x, y, z));
-  if (s < 0) return {};
-  const auto b = static_cast<std::size_t>(start_[static_cast<std::size_t>(s)]);
-  const auto e = static_cast<std::size_t>(start_[static_cast<std::size_t>(s) + 1]);
+  if (x < 0 || y < 0 || z < 0 || table_.empty()) return {};
+  const Slot& slot = table_[probe(key_of(x, y, z))];
+  if (slot.key == kEmpty) return {};
+  const auto b = static_cast<std::size_t>(start_[static_cast<std::size_t>(slot.cell)]);
+  const auto e = static_cast<std::size_t>(start_[static_cast<std::size_t>(slot.cell) + 1]);
   return {items_.data() + b, e - b};
 }
 

@@ -28,20 +28,30 @@ class CellGrid {
 
   std::size_t cells() const { return cells_; }
   std::size_t entries() const { return items_.size(); }
+  // Hash slots: at most four per occupied cell (at least 16), whatever the boxes span.
+  std::size_t slots() const { return table_.size(); }
 
  private:
+  struct Slot {
+    std::uint64_t key;  // kEmpty when free
+    std::int32_t cell;  // the occupied cell's number, in order of first use
+  };
   // The cell coordinate of x along axis k, or -1 beyond the grid.
   std::int64_t coordinate(double x, int k) const;
+  // The cell ranges of the box [lo, hi] (x, y, z lows, then highs).
+  void range_of(const Vec3& lo, const Vec3& hi, std::int64_t* r) const;
   // The slot holding `key`, or the free slot where it would go (linear probing).
   std::size_t probe(std::uint64_t key) const;
-  std::int64_t slot_of(std::uint64_t key) const;  // -1 if the cell is empty
+  // The number of the cell with `key`, made (and the table grown) if new.
+  std::int32_t cell_of(std::uint64_t key);
+  void resize_table(std::size_t capacity);
 
   Vec3 origin_ = Vec3::Zero();
   double cell_ = 1.0, inverse_ = 1.0;
   std::int64_t dims_[3] = {0, 0, 0};
-  // Open addressing: keys_[slot] (kEmpty when free), the slot's items at
-  // items_[start_[slot], start_[slot + 1]).
-  std::vector<std::uint64_t> keys_;
+  // Open addressing over the occupied cells only (kept at most half full): cell c's items are
+  // items_[start_[c], start_[c + 1]).
+  std::vector<Slot> table_;
   std::vector<std::int32_t> start_;
   std::vector<std::int32_t> items_;
   std::uint64_t mask_ = 0;

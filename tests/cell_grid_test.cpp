@@ -26,6 +26,10 @@ TEST(CellGrid, ListsEveryBoxHoldingThePoint) {
   const CellGrid grid(lo, hi);
   EXPECT_LE(static_cast<double>(grid.entries()), 16.0 * n + 64.0);
   EXPECT_GT(grid.cells(), 100u);  // a grid, not one cell holding everything
+  // The table is sized by the cells, not by the (item, cell) pairs: neighbouring boxes share
+  // most of their cells, and a table per pair was most of the cost of Ω's index.
+  EXPECT_LE(grid.slots(), 4 * grid.cells() + 16);
+  EXPECT_LT(grid.cells(), grid.entries());
   std::vector<Vec3> points;
   for (int k = 0; k < 3000; ++k) points.emplace_back(-10.0 + 120.0 * u01(rng), -10.0 + 60.0 * u01(rng), -3.0 + 11.0 * u01(rng));
   for (int i = 0; i < n; i += 7) {
