@@ -2,8 +2,11 @@
 #include <benchmark/benchmark.h>
 
 #include "bench/ladder.h"
+#include "kernels/memory.h"
 
 int main(int argc, char** argv) {
+  // As the flank command line runs (kernels/memory.h).
+  flank::retain_freed_memory();
   flank::register_ladder_benchmarks();
   benchmark::Initialize(&argc, argv);
   if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;

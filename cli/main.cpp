@@ -3,8 +3,10 @@
 #include <CLI/CLI.hpp>
 
 #include "cli/commands.h"
+#include "kernels/memory.h"
 
 int main(int argc, char** argv) {
+  flank::retain_freed_memory();
   CLI::App app{
       "flank — finds patches of a design surface that one sweep of one rotary cutter can flank-mill,\n"
       "designs the cutter and its 5-axis motion, and proves the error and the collisions."};

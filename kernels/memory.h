@@ -1,0 +1,15 @@
+// How the process keeps memory it frees: a setting an application makes once, at start (the
+// flank command line and flank_bench do). Library code never calls it.
+#pragma once
+
+namespace flank {
+
+// Freed memory stays with the process for the next allocation instead of going back to the
+// operating system. Every candidate patch builds an index over its Ω and drops it (tens of MB
+// for a large patch); by default glibc returns such blocks at once, and the next patch's index
+// then page-faults all of its memory afresh: a sixth of `decompose` on the 13.5k-vertex cone
+// part. Blocks up to 256 MiB come from the heap and up to 1 GiB of free heap is kept. A no-op
+// where the C library is not glibc.
+void retain_freed_memory();
+
+}  // namespace flank
