@@ -106,11 +106,21 @@ struct Problem {
   int n() const { return options.samples_s; }
 };
 
+// The cost at an iterate, and what JᵀJ and Jᵀr are made from there: they are assembled
+// (assemble()) only for an iterate the fit moves to. A trial step the fit rejects, or an
+// extension it does not take, needs its cost alone: about half of all evaluations.
 struct Evaluation {
   double cost = 0.0;
-  MatX H;  // N by N (full, symmetric)
-  VecX g;  // N
   int interior = 0;
+  // The samples' points and footpoints (row-major over t_i, s_j), the axis ends at the t_i and
+  // the sphere radii at the s_j.
+  Points q;
+  std::vector<ClosestPoint> cp;
+  std::vector<Vec3> a_i, b_i;
+  VecX d;
+  bool assembled = false;
+  MatX H;  // N by N (full, symmetric), once assembled
+  VecX g;  // N, once assembled
 };
 
 void unpack(const Layout& lay, const VecX& x, Points* A, Points* B, VecX* c) {
@@ -139,22 +149,32 @@ struct RowBlock {
   ProfileSquare Hcc;   // nc by nc
   Vec3 ga, gb;
   ProfileVec gc;
-  double cost = 0.0;
-  int interior = 0;
 };
+
+// Sample (p, its footpoint f, sphere radius d)'s residuals: ρ = ⟨p − p⊥, n⟩ − d (F_plane) and
+// q = p − (p⊥ + d n) (F_point).
+struct Residual {
+  double rho;
+  Vec3 q;
+};
+Residual residual(const Vec3& p, const ClosestPoint& f, double d) {
+  return {f.direction.dot(p - f.point) - d, p - f.point - d * f.direction};
+}
 
 Evaluation evaluate(Problem& pb, const VecX& x, std::vector<int>& hints, FitTiming& timing) {
   const Layout& lay = pb.layout;
-  const int m = pb.m(), n = pb.n(), nc = lay.nc;
-  assert(nc <= kSplineProfileCoefficients);
+  const int m = pb.m(), n = pb.n();
+  assert(lay.nc <= kSplineProfileCoefficients);
   Points A, B;
   VecX c;
   unpack(lay, x, &A, &B, &c);
-  const VecX d = pb.P * c;
+  Evaluation ev;
+  ev.d = pb.P * c;
+  const VecX& d = ev.d;
 
   auto t0 = Clock::now();
-  std::vector<Vec3> a_i(m), b_i(m);
-  Points q(static_cast<Eigen::Index>(m) * n, 3);
+  ev.a_i.resize(static_cast<std::size_t>(m)), ev.b_i.resize(static_cast<std::size_t>(m));
+  ev.q.resize(static_cast<Eigen::Index>(m) * n, 3);
   for (int i = 0; i < m; ++i) {
     const BasisRow& r = pb.rows[i];
     Vec3 ai = Vec3::Zero(), bi = Vec3::Zero();
@@ -162,15 +182,48 @@ Evaluation evaluate(Problem& pb, const VecX& x, std::vector<int>& hints, FitTimi
       ai += r.value[k] * A.row(r.first + k).transpose();
       bi += r.value[k] * B.row(r.first + k).transpose();
     }
-    a_i[i] = ai, b_i[i] = bi;
-    for (int j = 0; j < n; ++j) q.row(i * n + j) = ((1.0 - pb.s[j]) * ai + pb.s[j] * bi).transpose();
+    ev.a_i[i] = ai, ev.b_i[i] = bi;
+    for (int j = 0; j < n; ++j) ev.q.row(i * n + j) = ((1.0 - pb.s[j]) * ai + pb.s[j] * bi).transpose();
   }
-  std::vector<ClosestPoint> cp = pb.index.closest_points(q, hints);
-  for (std::size_t k = 0; k < cp.size(); ++k) hints[k] = cp[k].face;
+  ev.cp = pb.index.closest_points(ev.q, hints);
+  for (std::size_t k = 0; k < ev.cp.size(); ++k) hints[k] = ev.cp[k].face;
   timing.query_s += seconds_since(t0);
-  timing.queries += static_cast<long long>(cp.size());
+  timing.queries += static_cast<long long>(ev.cp.size());
 
+  // The cost, row by row, summed in row order.
   t0 = Clock::now();
+  std::vector<double> row_cost(static_cast<std::size_t>(m));
+  std::vector<int> row_interior(static_cast<std::size_t>(m));
+  parallel_for(0, static_cast<std::size_t>(m), [&](std::size_t begin, std::size_t end) {
+    for (std::size_t ii = begin; ii < end; ++ii) {
+      const int i = static_cast<int>(ii);
+      double cost = 0.0;
+      int interior = 0;
+      for (int j = 0; j < n; ++j) {
+        const ClosestPoint& f = ev.cp[static_cast<std::size_t>(i * n + j)];
+        if (f.boundary || f.face < 0) continue;  // beyond Φ: no proximity information
+        ++interior;
+        const Residual r = residual(ev.q.row(i * n + j).transpose(), f, d(j));
+        cost += pb.W1 * r.rho * r.rho + pb.W3 * r.q.squaredNorm();
+      }
+      // Rigidity (eq. 9) as a soft constraint at t_i.
+      const double r = (ev.a_i[ii] - ev.b_i[ii]).squaredNorm() - pb.L * pb.L;
+      cost += pb.W4 * r * r;
+      row_cost[ii] = cost, row_interior[ii] = interior;
+    }
+  }, 4);
+  for (int i = 0; i < m; ++i) ev.cost += row_cost[static_cast<std::size_t>(i)], ev.interior += row_interior[static_cast<std::size_t>(i)];
+  timing.assembly_s += seconds_since(t0);
+  return ev;
+}
+
+// JᵀJ and Jᵀr of an evaluation, once.
+void assemble(Problem& pb, Evaluation& ev, FitTiming& timing) {
+  if (ev.assembled) return;
+  const Layout& lay = pb.layout;
+  const int m = pb.m(), n = pb.n(), nc = lay.nc;
+  const VecX& d = ev.d;
+  const auto t0 = Clock::now();
   std::vector<RowBlock> blocks(static_cast<std::size_t>(m));
   parallel_for(0, static_cast<std::size_t>(m), [&](std::size_t begin, std::size_t end) {
     for (std::size_t ii = begin; ii < end; ++ii) {
@@ -181,14 +234,10 @@ Evaluation evaluate(Problem& pb, const VecX& x, std::vector<int>& hints, FitTimi
       rb.ga.setZero(), rb.gb.setZero();
       rb.gc = ProfileVec::Zero(nc);
       for (int j = 0; j < n; ++j) {
-        const ClosestPoint& f = cp[static_cast<std::size_t>(i * n + j)];
+        const ClosestPoint& f = ev.cp[static_cast<std::size_t>(i * n + j)];
         if (f.boundary || f.face < 0) continue;  // beyond Φ: no proximity information
-        ++rb.interior;
-        const Vec3 p = q.row(i * n + j).transpose();
         const Vec3& nn = f.direction;
-        const double rho = nn.dot(p - f.point) - d(j);
-        const Vec3 qv = p - f.point - d(j) * nn;
-        rb.cost += pb.W1 * rho * rho + pb.W3 * qv.squaredNorm();
+        const auto [rho, qv] = residual(ev.q.row(i * n + j).transpose(), f, d(j));
         // At a true footpoint p − p⊥ = dist·n, so q = (dist − d)·n and its exact derivative is
         // n nᵀ up to a term that vanishes with the residual. The frozen-footpoint model (I)
         // would pin the samples tangentially, like point-to-point ICP, and crawl along the
@@ -206,22 +255,18 @@ Evaluation evaluate(Problem& pb, const VecX& x, std::vector<int>& hints, FitTimi
         rb.ga += sa * gp, rb.gb += sb * gp;
         rb.gc -= (pb.W1 * rho + pb.W3 * nn.dot(qv)) * Pj.transpose();
       }
-      // Rigidity (eq. 9) as a soft constraint at t_i.
-      const Vec3 e = a_i[i] - b_i[i];
+      const Vec3 e = ev.a_i[ii] - ev.b_i[ii];
       const double r = e.squaredNorm() - pb.L * pb.L;
       const Eigen::Matrix3d E = 4.0 * pb.W4 * e * e.transpose();
       rb.Maa += E, rb.Mab -= E, rb.Mbb += E;
       rb.ga += 2.0 * pb.W4 * r * e, rb.gb -= 2.0 * pb.W4 * r * e;
-      rb.cost += pb.W4 * r * r;
     }
   }, 4);  // rows differ in cost (samples beyond Φ are skipped): small chunks balance them
 
-  Evaluation ev;
   const int N = lay.n();
   // Fairness acts on the update δ (W2 |D δ|², see FitOptions): it adds to JᵀJ only.
   ev.H = pb.fair_active ? pb.H_fair : MatX::Zero(N, N);
   ev.g = VecX::Zero(N);
-  for (const RowBlock& rb : blocks) ev.cost += rb.cost, ev.interior += rb.interior;
   // The blocks summed into JᵀJ and Jᵀr concurrently, each task owning rows of H and g: control
   // point k's six (its a and b), or the profile's nc. Every element still receives its terms
   // in i order, as one loop over i would add them: the sums are the same bits whatever the
@@ -267,7 +312,7 @@ Evaluation evaluate(Problem& pb, const VecX& x, std::vector<int>& hints, FitTimi
     }
   }, 1);
   timing.assembly_s += seconds_since(t0);
-  return ev;
+  ev.assembled = true;
 }
 
 // The cutter constraints of FitOptions as linear inequalities G c ≤ h on the profile
@@ -585,6 +630,7 @@ FitResult fit_motion(const SurfaceIndex& index, const Motion& init_motion,
   result.timing.factor_s += seconds_since(t0);
 
   Evaluation ev = evaluate(pb, x, hints, result.timing);
+  assemble(pb, ev, result.timing);
   result.initial_cost = ev.cost;
   double lambda = kInitialDamping;
   int iter = 0;
@@ -695,6 +741,8 @@ FitResult fit_motion(const SurfaceIndex& index, const Motion& init_motion,
             }
           }
         }
+        // The iterate moved to: its JᵀJ and Jᵀr are the next step's.
+        assemble(pb, ev, result.timing);
       } else {
         lambda *= kDampingGrowth;
       }
