@@ -17,11 +17,12 @@
 namespace flank::bench {
 
 // decompose on `mesh` (its BVH built inside the timing) at tolerance_rel × diagonal.
-// Counters: seconds per stage, triangles, patches, coverage, lines scored, candidates grown.
+// Counters: seconds per stage, triangles, patches, coverage, lines scored, candidates grown,
+// growths and searches reused.
 inline void run_decompose(benchmark::State& state, const Mesh& mesh, double tolerance_rel,
                           const std::vector<CutterKind>& kinds) {
   StageTimes sum;
-  double index_s = 0, coverage = 0, patches = 0, lines_scored = 0, grown = 0, regrown = 0;
+  double index_s = 0, coverage = 0, patches = 0, lines_scored = 0, grown = 0, regrown = 0, seeds_reused = 0;
   for (auto _ : state) {
     const auto t0 = std::chrono::steady_clock::now();
     const SurfaceIndex index(mesh);
@@ -37,6 +38,7 @@ inline void run_decompose(benchmark::State& state, const Mesh& mesh, double tole
     lines_scored = static_cast<double>(result.lines_scored);
     grown = result.grown;
     regrown = result.regrown;
+    seeds_reused = result.seeds_reused;
   }
   const double n = static_cast<double>(state.iterations());
   state.counters["triangles"] = static_cast<double>(mesh.face_count());
@@ -52,6 +54,7 @@ inline void run_decompose(benchmark::State& state, const Mesh& mesh, double tole
   state.counters["lines_scored"] = lines_scored;
   state.counters["grown"] = grown;  // candidates propagated and fitted: the fit stage's work
   state.counters["regrown"] = regrown;  // candidates an earlier round had grown, reused
+  state.counters["seeds_reused"] = seeds_reused;  // seeds whose earlier search was reused
 }
 
 // fit_motion from `start`. Counters: GN iterations, samples per iteration, closest-point

@@ -160,10 +160,10 @@ int run_decompose(const DecomposeArgs& a) {
   std::printf("coverage after 1..%zu patches:", r.coverage_curve.size());
   for (double c : r.coverage_curve) std::printf(" %.1f%%", 100.0 * c);
   std::printf("\n");
-  std::printf("time: index %.2fs, seeds %.2fs, candidates %.2fs (%lld lines scored, %d laid out), fit %.2fs (%d grown, "
-              "%d reused), cover %.2fs, finish %.2fs, total %.2fs\n",
-              index_s, r.times.seeds, r.times.candidates, r.lines_scored, r.candidates, r.times.fit, r.grown,
-              r.regrown, r.times.cover, r.times.finish, total);
+  std::printf("time: index %.2fs, seeds %.2fs, candidates %.2fs (%lld lines scored, %d laid out, %d seeds reused), "
+              "fit %.2fs (%d grown, %d reused), cover %.2fs, finish %.2fs, total %.2fs\n",
+              index_s, r.times.seeds, r.times.candidates, r.lines_scored, r.candidates, r.seeds_reused, r.times.fit,
+              r.grown, r.regrown, r.times.cover, r.times.finish, total);
   std::printf("%s\n", results_line(a).c_str());
   return 0;
 }

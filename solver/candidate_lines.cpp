@@ -70,6 +70,28 @@ struct Scored {
 
 }  // namespace
 
+void rank_candidates(std::vector<LineCandidate>& lines, const CoveredFaces& covered) {
+  for (LineCandidate& lc : lines) {
+    lc.sweep.fresh = fresh_fractions(lc.sweep, &covered);
+    // The area still to cut that the sweep passes over: per step, the length over uncovered Φ
+    // times the travel across the line (a line that turns as it sweeps travels farther than
+    // it sweeps).
+    lc.swept = lc.estimate = 0.0;
+    for (std::size_t r = 1; r < lc.sweep.rulings.size(); ++r) {
+      const Line& p = lc.sweep.rulings[r - 1];
+      const Line& q = lc.sweep.rulings[r];
+      const Vec3 step = 0.5 * (q.a + q.b) - 0.5 * (p.a + p.b);
+      const Vec3 along = (q.b - q.a).normalized();
+      const double across = (step - step.dot(along) * along).norm();
+      lc.swept += across;
+      lc.estimate += across * q.length() * 0.5 * (lc.sweep.fresh[r - 1] + lc.sweep.fresh[r]);
+    }
+  }
+  std::sort(lines.begin(), lines.end(), [](const LineCandidate& x, const LineCandidate& y) { return x.order < y.order; });
+  std::stable_sort(lines.begin(), lines.end(),
+                   [](const LineCandidate& x, const LineCandidate& y) { return x.estimate > y.estimate; });
+}
+
 FreeRun free_run(const SurfaceIndex& index, const Vec3& mid, const Vec3& u, double reach,
                  const CoveredFaces& covered) {
   FreeRun run;
@@ -105,6 +127,12 @@ FreeRun free_run(const SurfaceIndex& index, const Vec3& mid, const Vec3& u, doub
   return run;
 }
 
+bool free_runs_hold(const SurfaceIndex& index, const std::vector<FreeRunRecord>& runs, const CoveredFaces& covered) {
+  for (const FreeRunRecord& r : runs)
+    if (!(free_run(index, r.mid, r.u, r.reach, covered) == r.run)) return false;
+  return true;
+}
+
 Line lay_line(const Vec3& mid, const Vec3& u, double L, const FreeRun& run, double overhang) {
   const double length = run.low + run.high;
   double from;  // where the line starts, as a signed distance from mid along u
@@ -126,7 +154,14 @@ Line lay_line(const Vec3& mid, const Vec3& u, double L, const FreeRun& run, doub
 std::vector<LineCandidate> seed_candidates(const SurfaceIndex& index, const Seed& seed, int seed_id,
                                            const CoveredFaces& covered,
                                            const CandidateLineOptions& o,
-                                           const Thresholds& thresholds, long long* scored) {
+                                           const Thresholds& thresholds, long long* scored,
+                                           std::vector<FreeRunRecord>* runs) {
+  // Free runs through the cover, recorded where asked.
+  auto free_run_through = [&](const Vec3& mid, const Vec3& u) {
+    const FreeRun run = free_run(index, mid, u, o.length_max, covered);
+    if (runs) runs->push_back({mid, u, o.length_max, run});
+    return run;
+  };
   const double L_ref = std::sqrt(o.length_min * o.length_max);
   const CutterKind general = o.kinds.back();
   // The profiles that steer the search: the barrel where allowed, and the most general kind.
@@ -216,7 +251,7 @@ std::vector<LineCandidate> seed_candidates(const SurfaceIndex& index, const Seed
     Aimed a;
     a.u = (c.line.b - c.line.a).normalized();
     const Vec3 mid0 = 0.5 * (c.line.a + c.line.b);
-    const FreeRun run0 = free_run(index, mid0, a.u, o.length_max, covered);
+    const FreeRun run0 = free_run_through(mid0, a.u);
     a.L0 = laid_length(run0, o);
     const Line laid = lay_line(mid0, a.u, a.L0, run0, o.overhang);
     const Vec3 centre = 0.5 * (laid.a + laid.b);
@@ -293,7 +328,7 @@ std::vector<LineCandidate> seed_candidates(const SurfaceIndex& index, const Seed
       // The lengths: across the free part of Φ, then halved; and, once part of Φ is covered,
       // also across Φ regardless of it: a long sweep over covered area may replace several
       // short ones in the cover (greedy_cover's swaps), where gap-fillers alone cannot.
-      const FreeRun run = free_run(index, mid, axis, o.length_max, covered);
+      const FreeRun run = free_run_through(mid, axis);
       std::vector<std::pair<double, FreeRun>> laid;
       if (!covered.empty()) {
         const FreeRun whole = free_run(index, mid, axis, o.length_max, {});
@@ -338,26 +373,15 @@ std::vector<LineCandidate> seed_candidates(const SurfaceIndex& index, const Seed
         // here only guards against a line thrown off Φ (0.1 mm of approach per mm of travel).
         po.max_movability = 1e-2;
         po.max_profile_error = thresholds.sweep_misfit;
-        if (!covered.empty()) po.covered_faces = &covered;
+        // The sweep's rulings do not depend on the cover; what it passes over that is still
+        // to cut does (rank_candidates).
         lc.sweep = propagate(index, lc.line, po);
-        // The area still to cut that the sweep passes over: per step, the length over
-        // uncovered Φ times the travel across the line (a line that turns as it sweeps travels
-        // farther than it sweeps).
-        for (std::size_t r = 1; r < lc.sweep.rulings.size(); ++r) {
-          const Line& p = lc.sweep.rulings[r - 1];
-          const Line& q = lc.sweep.rulings[r];
-          const Vec3 step = 0.5 * (q.a + q.b) - 0.5 * (p.a + p.b);
-          const Vec3 along = (q.b - q.a).normalized();
-          const double across = (step - step.dot(along) * along).norm();
-          lc.swept += across;
-          lc.estimate += across * q.length() * 0.5 * (lc.sweep.fresh[r - 1] + lc.sweep.fresh[r]);
-        }
+        lc.order = static_cast<int>(out.size());
         if (lc.sweep.rulings.size() >= 4) out.push_back(std::move(lc));
       }
     }
   }
-  std::stable_sort(out.begin(), out.end(),
-                   [](const LineCandidate& x, const LineCandidate& y) { return x.estimate > y.estimate; });
+  rank_candidates(out, covered);
   return out;
 }
 

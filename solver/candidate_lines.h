@@ -74,18 +74,11 @@ struct LineCandidate {
   double inside = 0.0;     // length of the line over Φ
   double swept = 0.0;      // how far its midpoint travels across it in the probe sweep
   double estimate = 0.0;   // the area of Φ the probe sweep passed over: what it may cover
+  int order = 0;           // in the seed's search: among equal estimates the first found leads
 };
 
 // Faces of Φ already covered (#F 0/1) or empty when nothing is.
 using CoveredFaces = std::vector<char>;
-
-// The candidate lines at one seed, best estimate first. Deterministic; runs on the calling
-// thread. `scored` counts the lines whose footpoints were queried (a line judged with several
-// cutter kinds counts once).
-std::vector<LineCandidate> seed_candidates(const SurfaceIndex& index, const Seed& seed, int seed_id,
-                                           const CoveredFaces& covered,
-                                           const CandidateLineOptions& options,
-                                           const Thresholds& thresholds, long long* scored);
 
 // Along the line through `mid` with unit direction u: how far (≥ 0, each way, up to `reach`)
 // its footpoints stay inside Φ and off covered faces. The run through mid is searched in steps
@@ -93,9 +86,37 @@ std::vector<LineCandidate> seed_candidates(const SurfaceIndex& index, const Seed
 struct FreeRun {
   double low = 0.0, high = 0.0;  // distances from mid toward −u and +u
   bool low_open = false, high_open = false;  // the run goes on past `reach` that way
+  bool operator==(const FreeRun&) const = default;
 };
 FreeRun free_run(const SurfaceIndex& index, const Vec3& mid, const Vec3& u, double reach,
                  const CoveredFaces& covered);
+
+// One free_run and what it found.
+struct FreeRunRecord {
+  Vec3 mid = Vec3::Zero(), u = Vec3::Zero();
+  double reach = 0.0;
+  FreeRun run;
+};
+// Whether every recorded free_run finds exactly the same run under `covered`.
+bool free_runs_hold(const SurfaceIndex& index, const std::vector<FreeRunRecord>& runs, const CoveredFaces& covered);
+
+// The candidate lines at one seed, best estimate first. Deterministic; runs on the calling
+// thread. `scored` counts the lines whose footpoints were queried (a line judged with several
+// cutter kinds counts once). `runs`, when given, receives every free_run the search made
+// through the cover, with what it found: which lines the search finds depends on the cover
+// through these alone, so at the same seed, under a cover where each gives the same again
+// (free_runs_hold), it finds the same lines, ranked for that cover by rank_candidates.
+std::vector<LineCandidate> seed_candidates(const SurfaceIndex& index, const Seed& seed, int seed_id,
+                                           const CoveredFaces& covered,
+                                           const CandidateLineOptions& options,
+                                           const Thresholds& thresholds, long long* scored,
+                                           std::vector<FreeRunRecord>* runs = nullptr);
+
+// Each line's `sweep.fresh`, `swept` and `estimate` for the cover `covered` (empty: none), and
+// the lines in the order seed_candidates returns them: best estimate first, then `order`.
+// Moves no line and queries nothing: a seed's lines found under one cover are ranked so under
+// another.
+void rank_candidates(std::vector<LineCandidate>& lines, const CoveredFaces& covered);
 
 // The line of length L along u laid over a free run around `mid`: where the run is shorter
 // than L, centred on it; otherwise against the run's end nearer to mid when that end is

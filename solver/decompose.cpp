@@ -136,6 +136,35 @@ struct GrownCache {
   }
 };
 
+// Farthest-point seeding over what is still uncovered repeats most of a round's seeds once
+// the cover changes little (on Rotor 67's lower face 21 of the fourth round's 24). Which lines
+// a seed's search finds depends on the cover only through the free runs it lays them over;
+// how much of what is still to cut their sweeps pass over is counted again for the new cover
+// without a query (rank_candidates). A seed met again whose free runs all come out the same
+// under the new cover (a few hundred queries, against some 30,000 for its search) would find
+// the same lines: they are reused.
+struct SeedCache {
+  struct Entry {
+    Seed seed;
+    std::vector<FreeRunRecord> runs;
+    std::vector<LineCandidate> lines;
+  };
+  std::vector<Entry> entries;
+
+  static bool same(const Seed& x, const Seed& y) {
+    return x.vertex == y.vertex && x.point == y.point && x.normal == y.normal && x.dir_min == y.dir_min &&
+           x.dir_max == y.dir_max && x.k_min == y.k_min && x.k_max == y.k_max;
+  }
+  // The lines of the latest search at `seed` whose free runs hold under `covered`, or null.
+  // Reads only: safe from concurrent tasks.
+  const std::vector<LineCandidate>* find(const SurfaceIndex& index, const Seed& seed,
+                                         const CoveredFaces& covered) const {
+    for (auto e = entries.rbegin(); e != entries.rend(); ++e)
+      if (same(e->seed, seed)) return free_runs_hold(index, e->runs, covered) ? &e->lines : nullptr;
+    return nullptr;
+  }
+};
+
 }  // namespace
 
 DecomposeResult decompose(const SurfaceIndex& index, const DecomposeOptions& o, const ProgressFn& progress) {
@@ -203,6 +232,7 @@ DecomposeResult decompose(const SurfaceIndex& index, const DecomposeOptions& o, 
 
   std::vector<Patch> pool;                       // every valid candidate patch, in a deterministic order
   GrownCache cache;                              // every candidate grown so far
+  SeedCache seed_cache;                          // every seed searched with part of Φ covered
   std::vector<Claim> claims;                     // of every pool entry
   for (int round = 0; round < o.max_rounds; ++round) {
     const std::size_t picks_before = cover.picks.size();
@@ -226,12 +256,27 @@ DecomposeResult decompose(const SurfaceIndex& index, const DecomposeOptions& o, 
     const CoveredFaces covered = round == 0 ? CoveredFaces{} : faces_of(mesh, cover.vertex_patch);
     std::vector<std::vector<LineCandidate>> per_seed(seeds.size());
     std::vector<long long> scored(seeds.size(), 0);
+    // Round 0 sees no cover (and searches without it): only later rounds' searches are kept.
+    const bool keep = o.reuse_seeds && !covered.empty();
+    std::vector<char> reused(seeds.size(), 0);
+    std::vector<std::vector<FreeRunRecord>> runs(seeds.size());
     parallel_invoke_each(seeds.size(), [&](std::size_t s) {
-      per_seed[s] = seed_candidates(work, seeds[s], static_cast<int>(s), covered, lo, th, &scored[s]);
+      const std::vector<LineCandidate>* known = keep ? seed_cache.find(work, seeds[s], covered) : nullptr;
+      if (known) {
+        reused[s] = 1;
+        per_seed[s] = *known;
+        for (LineCandidate& c : per_seed[s]) c.seed = static_cast<int>(s);
+        rank_candidates(per_seed[s], covered);
+      } else {
+        per_seed[s] = seed_candidates(work, seeds[s], static_cast<int>(s), covered, lo, th, &scored[s],
+                                      keep ? &runs[s] : nullptr);
+      }
     });
     std::vector<LineCandidate> lines;
     for (std::size_t s = 0; s < seeds.size(); ++s) {
       out.lines_scored += scored[s];
+      if (reused[s]) ++out.seeds_reused;
+      else if (keep) seed_cache.entries.push_back({seeds[s], std::move(runs[s]), per_seed[s]});
       lines.insert(lines.end(), per_seed[s].begin(), per_seed[s].end());
     }
     out.candidates += static_cast<int>(lines.size());

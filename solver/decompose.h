@@ -59,6 +59,10 @@ struct DecomposeOptions {
   // A later round that lays out exactly a line an earlier one grew reuses that growth's pieces
   // instead of fitting them again (growth is deterministic: the same pieces either way).
   bool reuse_grown = true;
+  // A later round that seeds exactly where an earlier one did reuses that seed's candidate
+  // lines when none of the faces whose cover the search read has changed since (the search is
+  // deterministic and reads the cover nowhere else: the same lines either way).
+  bool reuse_seeds = true;
   int control_points = 16, samples_t = 48, samples_s = 16, iterations = 10;
   // How far an accepted Gauss–Newton step may be extended (FitOptions::max_extrapolations:
   // up to 2^this steps): a candidate needs the patch's extent, not the last digit of its cutter
@@ -103,6 +107,7 @@ struct DecomposeResult {
   int rounds = 0;
   int seeds = 0;
   long long lines_scored = 0;          // candidate lines whose footpoints were queried
+  int seeds_reused = 0;                // seeds whose lines an earlier round had found: reused
   int candidates = 0;                  // candidate lines laid out and swept
   int grown = 0;                       // candidates fitted
   int regrown = 0;                     // candidates an earlier round had grown: reused, not fitted

@@ -173,17 +173,13 @@ struct Stepper {
   // Without it the weakly determined sliding of cone-like lines integrates into drift.
   // `sweep`: the direction of travel (⟂ the axis), held still with hold_sweep. `residual`
   // receives the largest predicted distance misfit after the step.
-  Line correct(const Line& l, const Vec3& sweep, double* residual, double* inside) {
+  // `faces` receives the faces of l's footpoints inside Φ (−1 for the others).
+  Line correct(const Line& l, const Vec3& sweep, double* residual, std::vector<int>* faces) {
     std::vector<ClosestPoint> cp;
     const std::vector<double> d = distances(l, &cp);
     const int n = options.movability.samples;
-    if (inside) {
-      int fresh = 0;
-      for (int i = 0; i < n; ++i)
-        fresh += std::isfinite(d[i]) &&
-                 !(options.covered_faces && (*options.covered_faces)[static_cast<std::size_t>(cp[i].face)]);
-      *inside = static_cast<double>(fresh) / n;
-    }
+    faces->resize(static_cast<std::size_t>(n));
+    for (int i = 0; i < n; ++i) (*faces)[i] = std::isfinite(d[i]) ? cp[i].face : -1;
     const Vec3 u = (l.b - l.a).normalized(), n1 = u.unitOrthogonal(), n2 = u.cross(n1);
     Eigen::Matrix<double, 5, 5> H = Eigen::Matrix<double, 5, 5>::Zero();
     Eigen::Matrix<double, 5, 1> g = Eigen::Matrix<double, 5, 1>::Zero();
@@ -263,7 +259,7 @@ struct Stepper {
 };
 
 PropagateStop run(Stepper& st, const Line& start, const Vec3& initial_dir, double h,
-                  double max_travel, std::vector<Line>* out, std::vector<double>* inside, double* worst) {
+                  double max_travel, std::vector<Line>* out, std::vector<int>* faces, double* worst) {
   Line cur = start;
   Vec3 ref = initial_dir;
   double travel = 0.0;
@@ -292,8 +288,9 @@ PropagateStop run(Stepper& st, const Line& start, const Vec3& initial_dir, doubl
     Movability mv2;
     if (!st.velocity(half, vm1, &va2, &vb2, &mv2) || !mv2.ok()) return PropagateStop::left_surface;
     const Line pred = st.rigid({cur.a + h * va2, cur.b + h * vb2});
-    double residual = 0.0, inside_fraction = 0.0;
-    const Line next = st.correct(pred, vm1, &residual, &inside_fraction);
+    double residual = 0.0;
+    std::vector<int> next_faces;
+    const Line next = st.correct(pred, vm1, &residual, &next_faces);
     if (st.options.max_profile_error > 0 && residual > st.options.max_profile_error)
       return PropagateStop::profile_error;
     ref = 0.5 * (va2 + vb2);
@@ -304,7 +301,7 @@ PropagateStop run(Stepper& st, const Line& start, const Vec3& initial_dir, doubl
     if (progress < 0.25 * h) return PropagateStop::stalled;
     travel += progress;
     out->push_back(next);
-    inside->push_back(inside_fraction);
+    faces->insert(faces->end(), next_faces.begin(), next_faces.end());
     cur = next;
   }
 }
@@ -321,39 +318,52 @@ Propagation propagate(const SurfaceIndex& index, const Line& start,
   Stepper st{index, po, std::vector<int>(static_cast<std::size_t>(options.movability.samples), -1),
              start.length(), {}};
   st.step = h;
-  double fresh0 = 0.0;
+  const int n = options.movability.samples;
+  p.samples = n;
+  std::vector<int> faces0(static_cast<std::size_t>(n), -1);
   {
     std::vector<ClosestPoint> cp;
     st.profile = st.distances(start, &cp);
-    for (std::size_t i = 0; i < cp.size(); ++i)
-      fresh0 += std::isfinite(st.profile[i]) &&
-                !(po.covered_faces && (*po.covered_faces)[static_cast<std::size_t>(cp[i].face)]);
-    fresh0 /= std::max<std::size_t>(1, cp.size());
+    for (int i = 0; i < n; ++i) faces0[i] = std::isfinite(st.profile[i]) ? cp[i].face : -1;
     for (int e = 0; e < 2; ++e) st.edge_start[e] = st.edge(start, e == 0, e == 0 ? 0.0 : 1.0, &st.edge_hint[e]);
     st.reset_edges();
   }
   Movability m0 = movability(index, start.a, start.b, po.movability, st.hints);
   p.max_movability = m0.value;
-  if (!m0.ok()) {
-    p.rulings = {start};
-    p.fresh = {fresh0};
-    return p;
-  }
-  const Vec3 dir = m0.mu1 * m0.n1 + m0.mu2 * m0.n2;
   std::vector<Line> forward, backward;
-  std::vector<double> inside_forward, inside_backward;
-  p.stop_forward = run(st, start, dir, h, cap, &forward, &inside_forward, &p.max_movability);
-  std::fill(st.hints.begin(), st.hints.end(), -1);
-  st.reset_edges();
-  p.stop_backward = run(st, start, -dir, h, cap, &backward, &inside_backward, &p.max_movability);
+  std::vector<int> faces_forward, faces_backward;
+  if (m0.ok()) {
+    const Vec3 dir = m0.mu1 * m0.n1 + m0.mu2 * m0.n2;
+    p.stop_forward = run(st, start, dir, h, cap, &forward, &faces_forward, &p.max_movability);
+    std::fill(st.hints.begin(), st.hints.end(), -1);
+    st.reset_edges();
+    p.stop_backward = run(st, start, -dir, h, cap, &backward, &faces_backward, &p.max_movability);
+  }
   p.rulings.assign(backward.rbegin(), backward.rend());
-  p.fresh.assign(inside_backward.rbegin(), inside_backward.rend());
+  for (std::size_t r = backward.size(); r-- > 0;)
+    p.faces.insert(p.faces.end(), faces_backward.begin() + static_cast<std::ptrdiff_t>(r * n),
+                   faces_backward.begin() + static_cast<std::ptrdiff_t>((r + 1) * n));
   p.start_index = static_cast<int>(p.rulings.size());
   p.rulings.push_back(start);
-  p.fresh.push_back(fresh0);
+  p.faces.insert(p.faces.end(), faces0.begin(), faces0.end());
   p.rulings.insert(p.rulings.end(), forward.begin(), forward.end());
-  p.fresh.insert(p.fresh.end(), inside_forward.begin(), inside_forward.end());
+  p.faces.insert(p.faces.end(), faces_forward.begin(), faces_forward.end());
+  p.fresh = fresh_fractions(p, options.covered_faces);
   return p;
+}
+
+std::vector<double> fresh_fractions(const Propagation& p, const std::vector<char>* covered) {
+  std::vector<double> fresh(p.rulings.size(), 0.0);
+  if (p.samples <= 0) return fresh;
+  for (std::size_t r = 0; r < fresh.size(); ++r) {
+    int count = 0;
+    for (int i = 0; i < p.samples; ++i) {
+      const int f = p.faces[r * static_cast<std::size_t>(p.samples) + static_cast<std::size_t>(i)];
+      count += f >= 0 && !(covered && !covered->empty() && (*covered)[static_cast<std::size_t>(f)]);
+    }
+    fresh[r] = static_cast<double>(count) / p.samples;
+  }
+  return fresh;
 }
 
 LineStart line_driven_start(const SurfaceIndex& index, const Line& line,

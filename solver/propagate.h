@@ -82,11 +82,19 @@ struct Propagation {
   // Per ruling: the fraction of its samples whose footpoint is inside Φ and not on a covered
   // face (PropagateOptions::covered_faces): what the sweep passes over that is still to cut.
   std::vector<double> fresh;
+  // Per ruling, its `samples` footpoints' faces (−1 outside Φ), ruling after ruling: `fresh`
+  // again for another cover without a query (fresh_fractions).
+  std::vector<int> faces;
+  int samples = 0;
   int start_index = 0;
   PropagateStop stop_backward = PropagateStop::degenerate;
   PropagateStop stop_forward = PropagateStop::degenerate;
   double max_movability = 0.0;  // worst F_l along the kept rulings
 };
+
+// Per ruling of `p`: the fraction of its samples whose footpoint is inside Φ and not on a face
+// that `covered` (#F 0/1; null or empty: none) marks. propagate fills Propagation::fresh so.
+std::vector<double> fresh_fractions(const Propagation& p, const std::vector<char>* covered);
 
 // RK2 integration of (ȧ, ḃ) = (v(0), v(1)) with |b − a| = L kept and the sweep direction
 // kept continuous, both ways from `start`, on the calling thread.

@@ -394,6 +394,54 @@ TEST(SeedCandidates, EstimateCountsOnlyUncoveredArea) {
   EXPECT_GT(half[0].estimate, 0.8 * uncovered);
 }
 
+// decompose reuses a seed's search in a later round when its free runs come out the same under
+// the new cover: the lines found under one cover, ranked for another, must be exactly those a
+// search under the other finds. Covering a corner of the part, off the lines through the seed,
+// leaves its free runs as they were but changes what the sweeps pass over.
+TEST(SeedCandidates, LinesFoundUnderOneCoverRankForAnotherAsASearchThere) {
+  const ConePart p;
+  const Mesh& m = p.part.mesh;
+  const Seed seed = seed_at(m, (kRows / 2 + 10) * kCols + kCols / 2, 0.12 * p.diag);
+  const CandidateLineOptions o = decompose_like(p.diag, {CutterKind::cone});
+  const Thresholds th = thresholds_for(1e-4 * p.diag);
+  // Faces whose vertices all lie in rows [0, rows) and columns [cols, kCols).
+  auto block = [&](int rows, int cols) {
+    CoveredFaces c(static_cast<std::size_t>(m.face_count()), 0);
+    for (int f = 0; f < m.face_count(); ++f) {
+      bool in = true;
+      for (int k = 0; k < 3; ++k) in &= m.F(f, k) / kCols < rows && m.F(f, k) % kCols >= cols;
+      c[static_cast<std::size_t>(f)] = in;
+    }
+    return c;
+  };
+  const CoveredFaces first = block(kRows / 8, kCols - kCols / 8), later = block(kRows / 3, kCols - kCols / 3);
+  long long scored = 0;
+  std::vector<FreeRunRecord> runs;
+  std::vector<LineCandidate> reused = seed_candidates(p.index, seed, 0, first, o, th, &scored, &runs);
+  ASSERT_FALSE(reused.empty());
+  ASSERT_FALSE(runs.empty());
+  std::vector<double> before;
+  for (const LineCandidate& c : reused) before.push_back(c.estimate);
+  ASSERT_TRUE(free_runs_hold(p.index, runs, later));
+  rank_candidates(reused, later);
+  const std::vector<LineCandidate> searched = seed_candidates(p.index, seed, 0, later, o, th, &scored);
+  ASSERT_EQ(reused.size(), searched.size());
+  bool changed = false;
+  for (std::size_t k = 0; k < reused.size(); ++k) {
+    EXPECT_EQ(reused[k].order, searched[k].order) << k;
+    EXPECT_EQ(reused[k].line.a, searched[k].line.a) << k;
+    EXPECT_EQ(reused[k].line.b, searched[k].line.b) << k;
+    EXPECT_EQ(reused[k].kind, searched[k].kind) << k;
+    EXPECT_EQ(reused[k].estimate, searched[k].estimate) << k;
+    EXPECT_EQ(reused[k].swept, searched[k].swept) << k;
+    EXPECT_EQ(reused[k].sweep.fresh, searched[k].sweep.fresh) << k;
+    changed |= std::find(before.begin(), before.end(), searched[k].estimate) == before.end();
+  }
+  EXPECT_TRUE(changed) << "the later cover should change what some sweep passes over";
+  // Covering the seed's own rows changes its free runs: its search is not reused.
+  EXPECT_FALSE(free_runs_hold(p.index, runs, block(kRows / 2 + 12, 0)));
+}
+
 TEST(CandidateLineOptions, ValidateNamesTheProblem) {
   CandidateLineOptions o;
   EXPECT_NE(o.validate().find("radius"), std::string::npos);

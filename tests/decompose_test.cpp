@@ -138,9 +138,11 @@ TEST(Decompose, SameResultWhateverTheThreadCount) {
   }
 }
 
-// A later round that lays out a line an earlier round grew reuses its pieces: on this face it
-// happens (regrown > 0), and the result is the one of fitting them again, patch for patch.
-TEST(DecomposeRealFace, ReusingEarlierGrowthChangesNothing) {
+// A later round that lays out a line an earlier round grew reuses its pieces, and one that
+// seeds where an earlier round did, with the same free runs, reuses that search's lines: on
+// this face both happen (regrown > 0, seeds_reused > 0), and the result is the one of fitting
+// and searching again, patch for patch.
+TEST(DecomposeRealFace, ReusingEarlierGrowthOrSearchesChangesNothing) {
   const Mesh mesh = io::read_mesh(FLANK_TEST_DATA_DIR "/hecc_splitter_blade_side_a.stl").mesh;
   const SurfaceIndex index(mesh);
   DecomposeOptions o;
@@ -148,15 +150,24 @@ TEST(DecomposeRealFace, ReusingEarlierGrowthChangesNothing) {
   const DecomposeResult reused = decompose(index, o);
   o.reuse_grown = false;
   const DecomposeResult fitted = decompose(index, o);
+  o.reuse_grown = true;
+  o.reuse_seeds = false;
+  const DecomposeResult searched = decompose(index, o);
   EXPECT_GT(reused.regrown, 0);
   EXPECT_EQ(fitted.regrown, 0);
   EXPECT_EQ(reused.grown + reused.regrown, fitted.grown);
-  EXPECT_EQ(reused.coverage_curve, fitted.coverage_curve);
-  ASSERT_EQ(reused.patches.size(), fitted.patches.size());
-  for (std::size_t k = 0; k < reused.patches.size(); ++k) {
-    EXPECT_EQ(reused.patches[k].motion.a, fitted.patches[k].motion.a);
-    EXPECT_EQ(reused.patches[k].motion.b, fitted.patches[k].motion.b);
-    EXPECT_EQ(reused.patches[k].cutter.coeffs, fitted.patches[k].cutter.coeffs);
+  EXPECT_GT(reused.seeds_reused, 0);
+  EXPECT_EQ(searched.seeds_reused, 0);
+  EXPECT_LT(reused.lines_scored, searched.lines_scored);
+  EXPECT_EQ(reused.candidates, searched.candidates);
+  for (const DecomposeResult* other : {&fitted, &searched}) {
+    EXPECT_EQ(reused.coverage_curve, other->coverage_curve);
+    ASSERT_EQ(reused.patches.size(), other->patches.size());
+    for (std::size_t k = 0; k < reused.patches.size(); ++k) {
+      EXPECT_EQ(reused.patches[k].motion.a, other->patches[k].motion.a);
+      EXPECT_EQ(reused.patches[k].motion.b, other->patches[k].motion.b);
+      EXPECT_EQ(reused.patches[k].cutter.coeffs, other->patches[k].cutter.coeffs);
+    }
   }
 }
 
