@@ -305,6 +305,8 @@ struct SurfaceIndex::Impl {
   std::vector<std::int32_t> edge_start, edge_slots, slot_edge;
   std::vector<std::int32_t> vertex_start, vertex_faces;
   mutable std::once_flag subset_once;
+  std::vector<RecordedQuery>* log = nullptr;  // record_queries
+  mutable std::mutex log_mutex;
   Vec3 origin = Vec3::Zero();  // bbox centre; Embree gets coordinates relative to it
   double diagonal = 0.0;
   double slack = 0.0;       // absolute part of the conservative float radius
@@ -587,6 +589,10 @@ bool point_query_callback(RTCPointQueryFunctionArguments* args) {
 }  // namespace
 
 ClosestPoint SurfaceIndex::Impl::query(const Vec3& p, int hint_face, double max_distance, const char* mask) const {
+  if (log && max_distance == kInf && !mask) [[unlikely]] {
+    const std::lock_guard<std::mutex> lock(log_mutex);
+    log->push_back({p, hint_face});
+  }
 #ifdef FLANK_SLOW_QUERIES
   // A deliberate regression for test builds only (CMake -DFLANK_SLOW_QUERIES=ON): every
   // query is answered twice. It exists to prove that `scripts/scaling-report --check` catches
@@ -899,6 +905,8 @@ std::vector<ClosestPoint> SurfaceIndex::closest_points_within(PointsRef queries,
   if (!face_mask.empty()) impl_->need_subset_adjacency();
   return impl_->batch(queries, {}, max_distance, face_mask.empty() ? nullptr : face_mask.data());
 }
+
+void SurfaceIndex::record_queries(std::vector<RecordedQuery>* log) { impl_->log = log; }
 
 void SurfaceIndex::closest_points_serial(PointsRef queries, std::span<const int> hints,
                                          std::span<ClosestPoint> out) const {

@@ -83,6 +83,17 @@ class SurfaceIndex {
   void closest_points_serial(PointsRef queries, std::span<const int> hints,
                              std::span<ClosestPoint> out) const;
 
+  // While `log` is set (not null), every unbounded query (closest_point, closest_points,
+  // closest_points_serial) appends its point and the hint face it searched from (its own, or
+  // the previous answer's in a chained batch), under a lock: a workload's stream of queries,
+  // for a benchmark to replay on its own (bench/decompose_benchmark.cpp, BM_ReplayQueries). Set
+  // it while no query runs; run the workload on one thread to keep the stream in its order.
+  struct RecordedQuery {
+    Vec3 point;
+    int hint = -1;
+  };
+  void record_queries(std::vector<RecordedQuery>* log);
+
  private:
   SurfaceIndex(const Mesh& mesh, QueryEngine engine, double reach);
   struct Impl;
