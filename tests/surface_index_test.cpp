@@ -316,6 +316,35 @@ TEST(SurfaceIndex, MatchesBruteForceOnPerturbedGrid) {
   check_against_brute_force(m, make_queries(m, 500 * kQueryScale, 5), 9);
 }
 
+// record_queries logs what a replay needs: every unbounded query's point and the hint it
+// searched from (its own, or the previous answer's face in a chained batch), nothing of bounded
+// queries, and nothing once it is cleared.
+TEST(SurfaceIndex, RecordsUnboundedQueriesWithTheHintsTheySearchedFrom) {
+  SurfaceIndex index(perturbed_grid(3));
+  std::vector<SurfaceIndex::RecordedQuery> log;
+  index.record_queries(&log);
+  const Vec3 p0(0.3, 0.4, 0.5), p1(0.6, 0.2, 0.4), p2(0.1, 0.9, -0.3);
+  const ClosestPoint a = index.closest_point(p0, 7);
+  Points batch(2, 3);
+  batch.row(0) = p1.transpose();
+  batch.row(1) = p2.transpose();
+  std::vector<ClosestPoint> serial(2);
+  index.closest_points_serial(batch, {}, serial);
+  (void)index.closest_points_within(batch, 1.0);  // bounded: not logged
+  index.record_queries(nullptr);
+  (void)index.closest_point(p0);
+  ASSERT_EQ(log.size(), 3u);
+  EXPECT_EQ(log[0].point, p0);
+  EXPECT_EQ(log[0].hint, 7);
+  EXPECT_EQ(log[1].point, p1);
+  EXPECT_EQ(log[1].hint, -1);
+  EXPECT_EQ(log[2].point, p2);
+  EXPECT_EQ(log[2].hint, serial[0].face);  // chained: the previous answer's face
+  // Replayed with its hints, the stream gives the same answers.
+  EXPECT_EQ(index.closest_point(log[0].point, log[0].hint).face, a.face);
+  EXPECT_EQ(index.closest_point(log[2].point, log[2].hint).face, serial[1].face);
+}
+
 TEST(SurfaceIndex, MatchesBruteForceOnTriangleSoup) {
   const Mesh m = triangle_soup(2000, 13);
   check_against_brute_force(m, make_queries(m, 500 * kQueryScale, 17), 19);
