@@ -429,6 +429,17 @@ def closest_on_triangles(p, a, b, c):
 # Triangle mesh with closest-point queries, boundary and sign information
 # --------------------------------------------------------------------------------------
 
+def edge_ids(fe):
+    """Per face-edge slot (rows of fe: the two vertex indices), the id of its undirected edge,
+    edges numbered in (lower vertex, higher vertex) order, and each edge's slot count. The
+    same as np.unique of the sorted rows with axis=0, on one int64 key per slot: a row-wise
+    unique sorts a structured array field by field, and cost the checker a fifth of its time."""
+    lo, hi = np.minimum(fe[:, 0], fe[:, 1]), np.maximum(fe[:, 0], fe[:, 1])
+    n = int(hi.max()) + 1 if len(fe) else 1
+    _, eid, count = np.unique(lo.astype(np.int64) * n + hi, return_inverse=True, return_counts=True)
+    return eid.reshape(-1), count
+
+
 _CHUNK_PAIRS = 1 << 18  # point-triangle pairs per vectorised batch (memory ~ 100 MB)
 
 
@@ -454,9 +465,7 @@ class TriMesh:
 
         # Edge topology: face-edge slot k runs from corner k to corner k+1.
         fe = self.F[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
-        key = np.sort(fe, axis=1)
-        _, eid, ecount = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-        eid = eid.reshape(-1)
+        eid, ecount = edge_ids(fe)
         self.edge_id = eid.reshape(nf, 3)
         self.n_edges = len(ecount)
         self.boundary_edge = (ecount[eid] == 1).reshape(nf, 3)
@@ -655,9 +664,18 @@ class TriMesh:
         half the separation. Returns (use_b bool array, chosen points, query of them)."""
         half = 0.5 * np.linalg.norm(PA - PB, axis=1)
         qa = self.query(PA, limit=half)
-        qb = self.query(PB, limit=half)
         a_ok = qa["exact"] & (qa["dist"] <= half)
-        b_ok = qb["exact"] & (qb["dist"] <= half)
+        # Where A lies within half the separation with room to spare (far beyond rounding),
+        # B is farther than half and than A: B is neither ok nor chosen, so its side (the far
+        # side of the envelope, half of the checker's time) is only searched elsewhere.
+        need = np.nonzero(~(a_ok & (qa["dist"] < half * (1.0 - 1e-9))))[0]
+        qb = {key: np.zeros_like(value) for key, value in qa.items()}
+        b_ok = np.zeros(len(PA), dtype=bool)
+        if need.size:
+            sub = self.query(PB[need], limit=half[need])
+            for key in qb:
+                qb[key][need] = sub[key]
+            b_ok[need] = sub["exact"] & (sub["dist"] <= half[need])
         use_b = b_ok & ~(a_ok & (qa["dist"] <= qb["dist"]))
         # Both sides farther than half the separation (an error about as large as the
         # radius, or a grazing contact where the sides meet): search both in full.
@@ -762,9 +780,7 @@ def orient_consistently(F):
     F = F.copy()
     nf = len(F)
     fe = F[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2)
-    key = np.sort(fe, axis=1)
-    _, eid, cnt = np.unique(key, axis=0, return_inverse=True, return_counts=True)
-    eid = eid.reshape(-1)
+    eid, cnt = edge_ids(fe)
     forward = fe[:, 0] < fe[:, 1]
     slots = np.nonzero(cnt[eid] == 2)[0]
     slots = slots[np.argsort(eid[slots], kind="stable")]
