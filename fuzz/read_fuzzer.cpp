@@ -44,8 +44,9 @@ void expect(bool promise) {
 }
 
 // What read_mesh promises the kernels (kernels/mesh.h): faces index existing vertices, no
-// face repeats a vertex, coordinates are finite, and something is left.
-void check(const flank::io::LoadedMesh& m) {
+// face repeats a vertex, coordinates are finite, and something is left. (Unused by the targets
+// that read no mesh: --lines and --motion.)
+[[maybe_unused]] void check(const flank::io::LoadedMesh& m) {
   const flank::Mesh& mesh = m.mesh;
   expect(mesh.face_count() > 0 && mesh.vertex_count() > 0);
   expect(mesh.V.allFinite());

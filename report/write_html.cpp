@@ -26,7 +26,8 @@ using Json = nlohmann::ordered_json;
 
 constexpr long long kEnvelopeVertices = 40000;
 
-Json number(double v) { return std::isfinite(v) ? Json(v) : Json(nullptr); }
+// A JSON number, or null where the value is not finite (JSON has no NaN or infinity).
+Json finite_or_null(double v) { return std::isfinite(v) ? Json(v) : Json(nullptr); }
 
 // RFC 4648 base64 with padding: what the page's atob() reads.
 std::string base64(const std::string& bytes) {
@@ -169,28 +170,28 @@ Json patch_json(const Patch& p, double adds, long long envelope_budget) {
   out["id"] = p.id;
   out["kind"] = std::string(to_string(c.kind));
   out["tip"] = std::string(1, p.tip);
-  out["length"] = number(c.length);
+  out["length"] = finite_or_null(c.length);
   Json profile = Json::array();
   if (profiled) {
-    out["sphere_radius"] = Json::array({number(c.radius(0.0)), number(c.radius(1.0))});
-    out["end_radius"] = Json::array({number(c.meridian(0.0)(1)), number(c.meridian(1.0)(1))});
+    out["sphere_radius"] = Json::array({finite_or_null(c.radius(0.0)), finite_or_null(c.radius(1.0))});
+    out["end_radius"] = Json::array({finite_or_null(c.meridian(0.0)(1)), finite_or_null(c.meridian(1.0)(1))});
     constexpr int kProfileSamples = 101;
     for (int i = 0; i < kProfileSamples; ++i) {
       const Vec2 m = c.meridian(i / static_cast<double>(kProfileSamples - 1));
-      profile.push_back(Json::array({number(m(0)), number(m(1))}));
+      profile.push_back(Json::array({finite_or_null(m(0)), finite_or_null(m(1))}));
     }
   } else {
     out["sphere_radius"] = Json::array({nullptr, nullptr});
     out["end_radius"] = Json::array({nullptr, nullptr});
   }
-  out["error"] = Json{{"max", number(p.error.max)}, {"rms", number(p.error.rms)}, {"max_gouge", number(p.error.max_gouge)}};
-  out["coverage"] = Json{{"area", number(p.covered_area)}, {"fraction", number(p.coverage_fraction)}, {"adds", number(adds)}};
+  out["error"] = Json{{"max", finite_or_null(p.error.max)}, {"rms", finite_or_null(p.error.rms)}, {"max_gouge", finite_or_null(p.error.max_gouge)}};
+  out["coverage"] = Json{{"area", finite_or_null(p.covered_area)}, {"fraction", finite_or_null(p.coverage_fraction)}, {"adds", finite_or_null(adds)}};
   out["collision"] = Json{
       {"checked", p.collision.checked},
       {"holder_clear", p.collision.holder_clear},
-      {"min_clearance", p.collision.checked ? number(p.collision.min_clearance) : Json(nullptr)},
+      {"min_clearance", p.collision.checked ? finite_or_null(p.collision.min_clearance) : Json(nullptr)},
       {"holder", p.collision.checked
-                     ? Json::array({number(p.collision.holder_length), number(p.collision.holder_radius)})
+                     ? Json::array({finite_or_null(p.collision.holder_length), finite_or_null(p.collision.holder_radius)})
                      : Json(nullptr)}};
   out["profile"] = std::move(profile);
   // The axis sampled uniformly in t: the page moves the cutter along these, no spline code there.
@@ -254,23 +255,23 @@ void write_report_html(const fs::path& path, const RunInfo& run, const std::vect
                        {"format", run.input_format},
                        {"vertices", run.vertices},
                        {"triangles", run.triangles},
-                       {"bbox_diagonal", number(run.bbox_diagonal)}};
-  data["tolerance"] = number(run.tolerance);
+                       {"bbox_diagonal", finite_or_null(run.bbox_diagonal)}};
+  data["tolerance"] = finite_or_null(run.tolerance);
   Json curve = Json::array();
-  for (double c : run.coverage_curve) curve.push_back(number(c));
+  for (double c : run.coverage_curve) curve.push_back(finite_or_null(c));
   Json regions = Json::array();
   for (const RunInfo::Region& r : run.uncovered)
-    regions.push_back(Json{{"area", number(r.area)},
-                           {"centroid", Json::array({number(r.centroid.x()), number(r.centroid.y()), number(r.centroid.z())})},
+    regions.push_back(Json{{"area", finite_or_null(r.area)},
+                           {"centroid", Json::array({finite_or_null(r.centroid.x()), finite_or_null(r.centroid.y()), finite_or_null(r.centroid.z())})},
                            {"vertices", r.vertices}});
-  data["coverage"] = Json{{"fraction", number(run.coverage_fraction)},
-                          {"total_area", number(run.total_area)},
-                          {"uncovered_area", number(run.uncovered_area)},
+  data["coverage"] = Json{{"fraction", finite_or_null(run.coverage_fraction)},
+                          {"total_area", finite_or_null(run.total_area)},
+                          {"uncovered_area", finite_or_null(run.uncovered_area)},
                           {"curve", std::move(curve)},
                           {"regions", std::move(regions)}};
   data["settings"] = Json::parse(settings_json(run.settings));
   Json timing = Json::object();
-  for (const auto& [name, seconds] : run.timing_s) timing[name] = number(seconds);
+  for (const auto& [name, seconds] : run.timing_s) timing[name] = finite_or_null(seconds);
   data["timing_s"] = std::move(timing);
   Json palette = Json::array();
   for (const Rgb& c : kPalette) palette.push_back(hex(c));

@@ -22,6 +22,7 @@
 #include "report/write_step.h"
 #include "solver/motion.h"
 #include "tests/cli_run.h"
+#include "tests/test_files.h"
 
 namespace flank {
 namespace {
@@ -41,10 +42,7 @@ Points cylinder_grid(int rows, int cols, double z0 = 0.0) {
   return P;
 }
 
-std::string slurp(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  return std::string(std::istreambuf_iterator<char>(in), {});
-}
+using testing::slurp;
 
 class CadIo : public Cli {};
 
@@ -104,7 +102,7 @@ Patch sweeping_cylinder(bool stalled, double shift = 0.0) {
 TEST_F(CadIo, FaceDeviationIsTheWrittenFaces) {
   for (const auto& [rows, cols, target] : {std::tuple{5, 4, 1.0}, std::tuple{30, 7, 1e-14}}) {
     for (const report::FaceDomain& domain : {report::FaceDomain{}, report::FaceDomain{0.25, 0.75, 0.1, 1.0}}) {
-      SCOPED_TRACE(testing::Message() << rows << " rows, domain t0 " << domain.t0);
+      SCOPED_TRACE(::testing::Message() << rows << " rows, domain t0 " << domain.t0);
       const Points fine = cylinder_grid(rows, cols);
       const report::FittedSurface f = report::fit_exact_grid("cylinder", fine, rows, cols, target, domain);
       const int fr = 2 * rows - 1, fc = 2 * cols - 1;

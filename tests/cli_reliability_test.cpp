@@ -12,17 +12,13 @@
 #include "io/read_mesh.h"
 #include "io/write_mesh.h"
 #include "tests/cli_run.h"
+#include "tests/test_files.h"
 
 namespace {
 
 using namespace flank::cli_test;
 
-const char* kLine = "--line 33.75,33.75,-45,33.75,33.75,5";
-
-std::string slurp(const fs::path& p) {
-  std::ifstream in(p, std::ios::binary);
-  return std::string(std::istreambuf_iterator<char>(in), {});
-}
+using flank::testing::slurp;
 
 class Reliability : public Cli {
  protected:

@@ -17,6 +17,9 @@ namespace flank::cli_test {
 
 namespace fs = std::filesystem;
 
+// A line on the cone test part (tests/data/cone.obj) for the movability and fit commands.
+constexpr const char* kLine = "--line 33.75,33.75,-45,33.75,33.75,5";
+
 struct CliRun {
   int code = -1;
   std::string out, err;

@@ -17,8 +17,6 @@ namespace {
 
 using namespace flank::cli_test;
 
-const char* kLine = "--line 33.75,33.75,-45,33.75,33.75,5";
-
 TEST_F(Cli, BadMeshesGiveOneLineAndNoOutput) {
   const fs::path out = dir_ / "results";
   const std::array<std::pair<std::string, std::string>, 6> cases{{

@@ -27,6 +27,7 @@
 #include "io/read_lines.h"
 #include "io/read_mesh.h"
 #include "solver/synth.h"
+#include "tests/test_files.h"
 
 namespace flank::io {
 namespace {
@@ -36,10 +37,8 @@ namespace fs = std::filesystem;
 // A file of tests/data.
 std::string data_file(const std::string& name) { return FLANK_TEST_DATA_DIR "/" + name; }
 
-std::string slurp(const fs::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  return std::string(std::istreambuf_iterator<char>(in), {});
-}
+using testing::slurp;
+using testing::put_u32;
 
 // The message of the io::Error that `read` throws, or "" when it throws none.
 std::string error_of(const std::function<void()>& read) {
@@ -66,9 +65,6 @@ FlankRun flank(const std::vector<std::string>& args, const fs::path& scratch) {
   return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, slurp(err)};
 }
 
-void put_u32(std::string& s, std::uint32_t v) {
-  for (int k = 0; k < 4; ++k) s.push_back(static_cast<char>(v >> (8 * k)));
-}
 
 // A binary STL of `records` (50 bytes each) whose header claims `count` triangles.
 std::string binary_stl(const std::string& records, std::uint32_t count) {

@@ -19,6 +19,8 @@
 #include <string>
 #include <vector>
 
+#include "tests/test_files.h"
+
 namespace flank::io {
 namespace {
 
@@ -41,9 +43,7 @@ std::vector<std::array<int, 3>> cube_triangles() {
   return out;
 }
 
-void put_u32(std::string& s, std::uint32_t v) {
-  for (int k = 0; k < 4; ++k) s.push_back(static_cast<char>((v >> (8 * k)) & 0xff));
-}
+using testing::put_u32;
 void put_f32(std::string& s, float f) {
   std::uint32_t bits;
   std::memcpy(&bits, &f, 4);

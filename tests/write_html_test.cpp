@@ -22,6 +22,7 @@
 #include "kernels/cutter.h"
 #include "solver/motion.h"
 #include "tests/saddle_mesh.h"
+#include "tests/test_files.h"
 
 namespace flank::report {
 namespace {
@@ -29,18 +30,9 @@ namespace {
 namespace fs = std::filesystem;
 using Json = nlohmann::json;
 
-std::string slurp(const fs::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
+using testing::count_of;
+using testing::slurp;
 
-int count_of(const std::string& text, const std::string& what) {
-  int n = 0;
-  for (std::size_t pos = text.find(what); pos != std::string::npos; pos = text.find(what, pos + 1)) ++n;
-  return n;
-}
 
 std::string unbase64(const std::string& text) {
   auto value = [](char c) -> int {
@@ -87,7 +79,7 @@ Json page_data(const std::string& page) {
   return Json::parse(page.substr(from, end - from));
 }
 
-Mesh saddle() { return testing::saddle_mesh(6, 5); }
+Mesh html_saddle() { return testing::saddle_mesh(6, 5); }
 
 Patch make_patch(int id, double x0) {
   Patch p;
@@ -116,7 +108,7 @@ class WriteHtml : public ::testing::Test {
     dir_ = fs::temp_directory_path() / ("flank_write_html_" + std::to_string(::getpid()) + "_" + info->name());
     fs::remove_all(dir_);
     fs::create_directories(dir_);
-    mesh_ = saddle();
+    mesh_ = html_saddle();
     run_.command = "decompose";
     run_.input_path = "parts/blade.step";
     run_.input_format = "step";

@@ -27,6 +27,7 @@
 #include "kernels/cutter.h"
 #include "solver/motion.h"
 #include "tests/saddle_mesh.h"
+#include "tests/test_files.h"
 
 namespace flank::report {
 namespace {
@@ -41,19 +42,9 @@ namespace fs = std::filesystem;
 
 const std::string kData = FLANK_TEST_DATA_DIR;
 
-std::string slurp(const fs::path& path) {
-  std::ifstream in(path, std::ios::binary);
-  std::stringstream s;
-  s << in.rdbuf();
-  return s.str();
-}
+using testing::count_of;
+using testing::slurp;
 
-int count_of(const std::string& text, const std::string& what) {
-  int n = 0;
-  for (std::size_t pos = text.find(what); pos != std::string::npos; pos = text.find(what, pos + 1))
-    ++n;
-  return n;
-}
 
 // Each of `keys` occurs after the previous one, starting at `from`; returns the last position.
 std::size_t expect_in_order(const std::string& text, std::initializer_list<std::string> keys,
