@@ -13,11 +13,14 @@
 #include <fstream>
 #include <string>
 
+#include "tests/test_files.h"
+
 namespace flank::cli_test {
 
 namespace fs = std::filesystem;
 
-// A line on the cone test part (tests/data/cone.obj) for the movability and fit commands.
+// A line on the cone envelope the tests synthesize (`flank synth --tool cone:4,7`), for the
+// movability and fit commands.
 constexpr const char* kLine = "--line 33.75,33.75,-45,33.75,33.75,5";
 
 struct CliRun {
@@ -35,12 +38,8 @@ inline CliRun run(const std::string& args) {
   CliRun r;
   const int status = std::system(cmd.c_str());
   r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
-  auto slurp = [](const fs::path& p) {
-    std::ifstream in(p);
-    return std::string(std::istreambuf_iterator<char>(in), {});
-  };
-  r.out = slurp(out);
-  r.err = slurp(err);
+  r.out = testing::slurp(out);
+  r.err = testing::slurp(err);
   return r;
 }
 

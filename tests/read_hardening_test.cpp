@@ -65,7 +65,6 @@ FlankRun flank(const std::vector<std::string>& args, const fs::path& scratch) {
   return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, slurp(err)};
 }
 
-
 // A binary STL of `records` (50 bytes each) whose header claims `count` triangles.
 std::string binary_stl(const std::string& records, std::uint32_t count) {
   std::string s(80, ' ');
