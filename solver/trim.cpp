@@ -24,17 +24,36 @@ TrimRange best_rectangle(const std::vector<SampleClass>& cls, int rows, int cols
   auto at = [&](int i, int j) { return cls[static_cast<std::size_t>(i) * cols + j]; };
   std::vector<char> bad(static_cast<std::size_t>(rows));
   std::vector<int> within(static_cast<std::size_t>(rows));
+  // The samples within tolerance in columns c and beyond (all rows of the range): no
+  // rectangle from column c on holds more.
+  std::vector<int> beyond(static_cast<std::size_t>(cols) + 1, 0);
+  for (int j = cols - 1; j >= 0; --j) {
+    int n = 0;
+    for (int i = r_begin; i < r_end; ++i) n += at(i, j) == SampleClass::within;
+    beyond[static_cast<std::size_t>(j)] = beyond[static_cast<std::size_t>(j) + 1] + n;
+  }
   // Every column range [c0, c1], and within it the best run of rows with no sample out of
-  // tolerance: O(cols² · rows), a few hundred thousand steps on an evaluation grid.
+  // tolerance: O(cols² · rows) at most. A rectangle is taken only if it holds more than the
+  // best so far, so the ranges that provably cannot are skipped: the same rectangle, and on
+  // a grid mostly within tolerance (a finished patch's) a few passes over it instead of cols.
   for (int c0 = 0; c0 < cols; ++c0) {
+    if (beyond[static_cast<std::size_t>(c0)] <= best.within) break;
     std::fill(bad.begin(), bad.end(), 0);
     std::fill(within.begin(), within.end(), 0);
     for (int c1 = c0; c1 < cols; ++c1) {
+      int open = 0;  // within tolerance in [c0, c1], over the rows still clean there
       for (int i = r_begin; i < r_end; ++i) {
         bad[i] |= at(i, c1) == SampleClass::outside;
         within[i] += at(i, c1) == SampleClass::within;
+        if (!bad[i]) open += within[i];
       }
-      if (c1 - c0 + 1 < o.min_cols) continue;
+      // Any range [c0, c1' ≥ c1] keeps only rows clean here and adds at most what lies
+      // beyond c1: once that cannot beat the best, no wider range from c0 can.
+      const int bound = open + beyond[static_cast<std::size_t>(c1) + 1];
+      if (c1 - c0 + 1 < o.min_cols) {
+        if (bound <= best.within) break;
+        continue;
+      }
       int run_start = r_begin, sum = 0;
       for (int i = r_begin; i <= r_end; ++i) {
         if (i < r_end && !bad[i]) {
@@ -49,6 +68,7 @@ TrimRange best_rectangle(const std::vector<SampleClass>& cls, int rows, int cols
         run_start = i + 1;
         sum = 0;
       }
+      if (bound <= best.within) break;
     }
   }
   if (best.empty) return best;

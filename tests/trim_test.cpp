@@ -515,6 +515,57 @@ TEST(Trim, FindTrimIsTheBestRectangle) {
   }
 }
 
+// The same on grids the size of a finished patch's and mostly within tolerance (a few samples
+// out, overhang at the ends), where the search skips the column ranges that cannot beat its
+// best so far: the brute force over every rectangle by prefix sums.
+TEST(Trim, FindTrimIsTheBestRectangleOnLargeGridsMostlyWithin) {
+  std::mt19937 rng(777);
+  for (int trial = 0; trial < 60; ++trial) {
+    const int rows = 20 + static_cast<int>(rng() % 60), cols = 8 + static_cast<int>(rng() % 24);
+    ErrorGrid g = within_grid(rows, cols);
+    const unsigned out_per_mille = 2 + rng() % 40;
+    for (int i = 0; i < rows; ++i)
+      for (int j = 0; j < cols; ++j) {
+        if (rng() % 1000 < out_per_mille) set_outside(g, i, j);
+        else if (j == 0 || j == cols - 1 || i < 2) set_overhang(g, i, j);
+      }
+    if (trial % 3 == 0) set_outside_row(g, static_cast<int>(rng() % static_cast<unsigned>(rows)));
+    PieceOptions o;
+    o.min_rows = 2 + static_cast<int>(rng() % 6);
+    o.min_cols = 2 + static_cast<int>(rng() % 4);
+    const std::vector<SampleClass> cls = classify_samples(g, kTol);
+    // Prefix sums: P[i][j] counts the class in rows < i, columns < j.
+    const auto prefix = [&](SampleClass c) {
+      std::vector<int> P(static_cast<std::size_t>((rows + 1) * (cols + 1)), 0);
+      for (int i = 0; i < rows; ++i)
+        for (int j = 0; j < cols; ++j)
+          P[static_cast<std::size_t>((i + 1) * (cols + 1) + j + 1)] =
+              P[static_cast<std::size_t>(i * (cols + 1) + j + 1)] + P[static_cast<std::size_t>((i + 1) * (cols + 1) + j)] -
+              P[static_cast<std::size_t>(i * (cols + 1) + j)] + (cls[g.index(i, j)] == c);
+      return P;
+    };
+    const std::vector<int> W = prefix(SampleClass::within), X = prefix(SampleClass::outside);
+    const auto count = [&](const std::vector<int>& P, int r0, int r1, int c0, int c1) {
+      const auto at = [&](int i, int j) { return P[static_cast<std::size_t>(i * (cols + 1) + j)]; };
+      return at(r1 + 1, c1 + 1) - at(r0, c1 + 1) - at(r1 + 1, c0) + at(r0, c0);
+    };
+    int best = 0;
+    for (int r0 = 0; r0 < rows; ++r0)
+      for (int r1 = r0 + o.min_rows - 1; r1 < rows; ++r1)
+        for (int c0 = 0; c0 < cols; ++c0)
+          for (int c1 = c0 + o.min_cols - 1; c1 < cols; ++c1)
+            if (count(X, r0, r1, c0, c1) == 0) best = std::max(best, count(W, r0, r1, c0, c1));
+    const TrimRange r = find_trim(g, kTol, o);
+    SCOPED_TRACE(::testing::Message() << "trial " << trial << ", " << rows << " x " << cols);
+    if (best == 0) {
+      EXPECT_TRUE(r.empty);
+      continue;
+    }
+    expect_consistent(g, r);
+    EXPECT_EQ(r.within, best);
+  }
+}
+
 // --- restrict_cutter ---------------------------------------------------------------------
 
 // Cutter::fit adds a ridge of 1e-12 of its normal matrix's diagonal, so a profile of the
