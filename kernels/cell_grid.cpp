@@ -7,6 +7,8 @@
 #include <cmath>
 #include <limits>
 
+#include "kernels/parallel.h"
+
 namespace flank {
 
 namespace {
@@ -103,32 +105,34 @@ CellGrid::CellGrid(std::span<const Vec3> lo, std::span<const Vec3> hi) {
   const auto total = static_cast<std::size_t>(pairs);  // exact: at most 16 per item here
   resize_table(std::bit_ceil(std::max<std::size_t>(total / 4, 16)));
   std::vector<std::int32_t> count;
-  const auto for_cells = [&](auto&& f) {
-    for (std::int64_t z = r[2]; z <= r[5]; ++z)
-      for (std::int64_t y = r[1]; y <= r[4]; ++y)
-        for (std::int64_t x = r[0]; x <= r[3]; ++x) f(key_of(x, y, z));
-  };
+  // Each pair's cell, as the count meets it: the fill then reads them in order, with no box
+  // ranges or hash probes again.
+  Buffer<std::int32_t> pair_cell(total);  // written before read: not zeroed first
+  Buffer<std::int32_t> spans(n);          // each item's number of cells
+  std::size_t j = 0;
   for (std::size_t i = 0; i < n; ++i) {
     range_of(lo[i], hi[i], r);
-    for_cells([&](std::uint64_t key) {
-      const auto c = static_cast<std::size_t>(cell_of(key));
-      if (c == count.size()) count.push_back(0);
-      ++count[c];
-    });
+    const std::size_t first = j;
+    for (std::int64_t z = r[2]; z <= r[5]; ++z)
+      for (std::int64_t y = r[1]; y <= r[4]; ++y)
+        for (std::int64_t x = r[0]; x <= r[3]; ++x) {
+          const std::int32_t c = cell_of(key_of(x, y, z));
+          if (static_cast<std::size_t>(c) == count.size()) count.push_back(0);
+          ++count[static_cast<std::size_t>(c)];
+          pair_cell[j++] = c;
+        }
+    spans[i] = static_cast<std::int32_t>(j - first);
   }
+  assert(j == total);
   start_.resize(cells_ + 1);
   start_[0] = 0;
   for (std::size_t c = 0; c < cells_; ++c) start_[c + 1] = start_[c] + count[c];
   items_.resize(total);
   for (std::size_t c = 0; c < cells_; ++c) count[c] = start_[c];  // now each cell's next place
-  for (std::size_t i = 0; i < n; ++i) {
-    range_of(lo[i], hi[i], r);
-    for_cells([&](std::uint64_t key) {
-      const std::size_t s = probe(key);
-      assert(table_[s].key == key);
-      items_[static_cast<std::size_t>(count[static_cast<std::size_t>(table_[s].cell)]++)] = static_cast<std::int32_t>(i);
-    });
-  }
+  j = 0;
+  for (std::size_t i = 0; i < n; ++i)
+    for (std::int32_t m = 0; m < spans[i]; ++m)
+      items_[static_cast<std::size_t>(count[static_cast<std::size_t>(pair_cell[j++])]++)] = static_cast<std::int32_t>(i);
 }
 
 std::span<const std::int32_t> CellGrid::items_at(const Vec3& p) const {
