@@ -47,28 +47,25 @@ TrimRange best_rectangle(const std::vector<SampleClass>& cls, int rows, int cols
         within[i] += at(i, c1) == SampleClass::within;
         if (!bad[i]) open += within[i];
       }
-      // Any range [c0, c1' ≥ c1] keeps only rows clean here and adds at most what lies
+      if (c1 - c0 + 1 >= o.min_cols) {
+        int run_start = r_begin, sum = 0;
+        for (int i = r_begin; i <= r_end; ++i) {
+          if (i < r_end && !bad[i]) {
+            sum += within[i];
+            continue;
+          }
+          if (i - run_start >= o.min_rows && sum > best.within) {
+            best.row0 = run_start, best.row1 = i - 1, best.col0 = c0, best.col1 = c1;
+            best.within = sum;
+            best.empty = false;
+          }
+          run_start = i + 1;
+          sum = 0;
+        }
+      }
+      // Any range [c0, c1' > c1] keeps only rows clean here and adds at most what lies
       // beyond c1: once that cannot beat the best, no wider range from c0 can.
-      const int bound = open + beyond[static_cast<std::size_t>(c1) + 1];
-      if (c1 - c0 + 1 < o.min_cols) {
-        if (bound <= best.within) break;
-        continue;
-      }
-      int run_start = r_begin, sum = 0;
-      for (int i = r_begin; i <= r_end; ++i) {
-        if (i < r_end && !bad[i]) {
-          sum += within[i];
-          continue;
-        }
-        if (i - run_start >= o.min_rows && sum > best.within) {
-          best.row0 = run_start, best.row1 = i - 1, best.col0 = c0, best.col1 = c1;
-          best.within = sum;
-          best.empty = false;
-        }
-        run_start = i + 1;
-        sum = 0;
-      }
-      if (bound <= best.within) break;
+      if (open + beyond[static_cast<std::size_t>(c1) + 1] <= best.within) break;
     }
   }
   if (best.empty) return best;

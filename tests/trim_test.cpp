@@ -473,8 +473,43 @@ TEST(Trim, TiesKeepTheFirstFoundColumnsFirst) {
   EXPECT_EQ(r.col0, 0);
 }
 
-// The best rectangle against a brute force over every rectangle of small random grids: the
-// same worth, nothing out of tolerance inside, and its worth is what it holds.
+// find_trim against a brute force over every rectangle of g (by prefix sums): the same worth,
+// nothing out of tolerance inside, and its worth is what it holds; nothing where no rectangle
+// of the minimum size holds a sample within tolerance.
+void expect_best_rectangle(const ErrorGrid& g, const PieceOptions& o) {
+  const int rows = g.rows, cols = g.cols;
+  const std::vector<SampleClass> cls = classify_samples(g, kTol);
+  // P[i][j] counts the class in rows < i, columns < j.
+  const auto prefix = [&](SampleClass c) {
+    std::vector<int> P(static_cast<std::size_t>((rows + 1) * (cols + 1)), 0);
+    for (int i = 0; i < rows; ++i)
+      for (int j = 0; j < cols; ++j)
+        P[static_cast<std::size_t>((i + 1) * (cols + 1) + j + 1)] =
+            P[static_cast<std::size_t>(i * (cols + 1) + j + 1)] + P[static_cast<std::size_t>((i + 1) * (cols + 1) + j)] -
+            P[static_cast<std::size_t>(i * (cols + 1) + j)] + (cls[g.index(i, j)] == c);
+    return P;
+  };
+  const std::vector<int> W = prefix(SampleClass::within), X = prefix(SampleClass::outside);
+  const auto count = [&](const std::vector<int>& P, int r0, int r1, int c0, int c1) {
+    const auto at = [&](int i, int j) { return P[static_cast<std::size_t>(i * (cols + 1) + j)]; };
+    return at(r1 + 1, c1 + 1) - at(r0, c1 + 1) - at(r1 + 1, c0) + at(r0, c0);
+  };
+  int best = 0;
+  for (int r0 = 0; r0 < rows; ++r0)
+    for (int r1 = r0 + o.min_rows - 1; r1 < rows; ++r1)
+      for (int c0 = 0; c0 < cols; ++c0)
+        for (int c1 = c0 + o.min_cols - 1; c1 < cols; ++c1)
+          if (count(X, r0, r1, c0, c1) == 0) best = std::max(best, count(W, r0, r1, c0, c1));
+  const TrimRange r = find_trim(g, kTol, o);
+  if (best == 0) {
+    EXPECT_TRUE(r.empty);
+    return;
+  }
+  expect_consistent(g, r);
+  EXPECT_EQ(r.within, best);
+}
+
+// The best rectangle of small random grids.
 TEST(Trim, FindTrimIsTheBestRectangle) {
   std::mt19937 rng(12345);
   for (int trial = 0; trial < 300; ++trial) {
@@ -489,35 +524,14 @@ TEST(Trim, FindTrimIsTheBestRectangle) {
     PieceOptions o;
     o.min_rows = 2 + static_cast<int>(rng() % 3);
     o.min_cols = 2 + static_cast<int>(rng() % 2);
-    const std::vector<SampleClass> cls = classify_samples(g, kTol);
-    int best = 0;
-    for (int r0 = 0; r0 < rows; ++r0)
-      for (int r1 = r0 + o.min_rows - 1; r1 < rows; ++r1)
-        for (int c0 = 0; c0 < cols; ++c0)
-          for (int c1 = c0 + o.min_cols - 1; c1 < cols; ++c1) {
-            int within = 0;
-            bool bad = false;
-            for (int i = r0; i <= r1; ++i)
-              for (int j = c0; j <= c1; ++j) {
-                bad |= cls[g.index(i, j)] == SampleClass::outside;
-                within += cls[g.index(i, j)] == SampleClass::within;
-              }
-            if (!bad) best = std::max(best, within);
-          }
-    const TrimRange r = find_trim(g, kTol, o);
     SCOPED_TRACE(::testing::Message() << "trial " << trial);
-    if (best == 0) {
-      EXPECT_TRUE(r.empty);
-      continue;
-    }
-    expect_consistent(g, r);
-    EXPECT_EQ(r.within, best);
+    expect_best_rectangle(g, o);
   }
 }
 
 // The same on grids the size of a finished patch's and mostly within tolerance (a few samples
 // out, overhang at the ends), where the search skips the column ranges that cannot beat its
-// best so far: the brute force over every rectangle by prefix sums.
+// best so far.
 TEST(Trim, FindTrimIsTheBestRectangleOnLargeGridsMostlyWithin) {
   std::mt19937 rng(777);
   for (int trial = 0; trial < 60; ++trial) {
@@ -533,36 +547,8 @@ TEST(Trim, FindTrimIsTheBestRectangleOnLargeGridsMostlyWithin) {
     PieceOptions o;
     o.min_rows = 2 + static_cast<int>(rng() % 6);
     o.min_cols = 2 + static_cast<int>(rng() % 4);
-    const std::vector<SampleClass> cls = classify_samples(g, kTol);
-    // Prefix sums: P[i][j] counts the class in rows < i, columns < j.
-    const auto prefix = [&](SampleClass c) {
-      std::vector<int> P(static_cast<std::size_t>((rows + 1) * (cols + 1)), 0);
-      for (int i = 0; i < rows; ++i)
-        for (int j = 0; j < cols; ++j)
-          P[static_cast<std::size_t>((i + 1) * (cols + 1) + j + 1)] =
-              P[static_cast<std::size_t>(i * (cols + 1) + j + 1)] + P[static_cast<std::size_t>((i + 1) * (cols + 1) + j)] -
-              P[static_cast<std::size_t>(i * (cols + 1) + j)] + (cls[g.index(i, j)] == c);
-      return P;
-    };
-    const std::vector<int> W = prefix(SampleClass::within), X = prefix(SampleClass::outside);
-    const auto count = [&](const std::vector<int>& P, int r0, int r1, int c0, int c1) {
-      const auto at = [&](int i, int j) { return P[static_cast<std::size_t>(i * (cols + 1) + j)]; };
-      return at(r1 + 1, c1 + 1) - at(r0, c1 + 1) - at(r1 + 1, c0) + at(r0, c0);
-    };
-    int best = 0;
-    for (int r0 = 0; r0 < rows; ++r0)
-      for (int r1 = r0 + o.min_rows - 1; r1 < rows; ++r1)
-        for (int c0 = 0; c0 < cols; ++c0)
-          for (int c1 = c0 + o.min_cols - 1; c1 < cols; ++c1)
-            if (count(X, r0, r1, c0, c1) == 0) best = std::max(best, count(W, r0, r1, c0, c1));
-    const TrimRange r = find_trim(g, kTol, o);
     SCOPED_TRACE(::testing::Message() << "trial " << trial << ", " << rows << " x " << cols);
-    if (best == 0) {
-      EXPECT_TRUE(r.empty);
-      continue;
-    }
-    expect_consistent(g, r);
-    EXPECT_EQ(r.within, best);
+    expect_best_rectangle(g, o);
   }
 }
 
