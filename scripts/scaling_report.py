@@ -73,6 +73,10 @@ class Bench:
     cv: float | None
     repetitions: int
     counters: dict = field(default_factory=dict)
+    # Real seconds per repetition, by repetition index (plain iteration entries only): one
+    # process each in the scaling report, so repetition i of two benchmarks ran minutes apart
+    # at most, and back to back for the 1- and 2-thread runs of one rung.
+    reals: dict = field(default_factory=dict)
     stage: str | None = None
     part: str | None = None
     tri_k: int | None = None
@@ -138,7 +142,20 @@ def _from_iterations(key, runs):
     names = set().union(*(_counters(r).keys() for r in runs))
     counters = {n: statistics.median([_counters(r)[n] for r in runs if n in _counters(r)])
                 for n in names}
-    return Bench(key, statistics.median(reals), statistics.median(cpus), cv, len(runs), counters)
+    return Bench(key, statistics.median(reals), statistics.median(cpus), cv, len(runs), counters,
+                 _reals_by_repetition(runs))
+
+
+def _reals_by_repetition(runs):
+    """{repetition index: real seconds} of iteration entries; {} unless every one has a time
+    and a distinct index (its position where the entry has none)."""
+    out = {}
+    for position, r in enumerate(runs):
+        seconds, index = _seconds(r, "real_time"), r.get("repetition_index")
+        if seconds is None:
+            return {}
+        out[index if isinstance(index, int) else position] = seconds
+    return out if len(out) == len(runs) else {}
 
 
 def read_gb_json(path):
@@ -170,7 +187,9 @@ def load_run(path):
     benches = {}
     for key, g in groups.items():
         b = _from_aggregates(key, g["aggregates"]) if g["aggregates"] else None
-        if b is None and g["iterations"]:
+        if b is not None:
+            b.reals = _reals_by_repetition(g["iterations"])
+        elif g["iterations"]:
             b = _from_iterations(key, g["iterations"])
         if b is None:
             continue
@@ -311,8 +330,22 @@ def scoring_rows(lad):
     return rows
 
 
+def paired_ratio(t1s, t2s):
+    """Median over the repetitions both have of t1_i / t2_i, and how many; (None, 0) with
+    fewer than two. The machine's speed drifts by tens of percent over a run; the 1- and
+    2-thread runs of one repetition ran back to back, so their ratio does not see the drift
+    that a ratio of medians taken minutes apart does."""
+    common = sorted(set(t1s) & set(t2s))
+    ratios = [t1s[i] / t2s[i] for i in common if t2s[i] > 0]
+    if len(ratios) < 2 or len(ratios) != len(common):
+        return None, 0
+    return statistics.median(ratios), len(ratios)
+
+
 def parallel_rows(benches):
-    """Speed-up and efficiency for every key with threads:1 and threads:2 runs."""
+    """Speed-up and efficiency for every key with threads:1 and threads:2 runs: the median of
+    the per-repetition ratios where both have two or more repetitions, else the ratio of the
+    medians ("pairs" 0)."""
     rows = []
     for key in ordered_keys(benches):
         b1 = benches[key]
@@ -322,11 +355,12 @@ def parallel_rows(benches):
         b2 = benches.get(base + "/threads:2")
         if b2 is None:
             continue
+        paired, pairs = paired_ratio(b1.reals, b2.reals)
+        ratio = paired if pairs else speedup(b1.real_s, b2.real_s)
         rows.append({
             "benchmark": base, "stage": b1.stage, "part": b1.part, "tri_k": b1.tri_k,
             "triangles": b1.triangles, "t1_s": b1.real_s, "t2_s": b2.real_s,
-            "speedup": speedup(b1.real_s, b2.real_s),
-            "efficiency": parallel_efficiency(b1.real_s, b2.real_s),
+            "speedup": ratio, "efficiency": None if ratio is None else ratio / 2, "pairs": pairs,
         })
     return rows
 
@@ -697,11 +731,15 @@ def build_markdown(title, run_path, context, benches, base_path, base, lad):
          for r in scoring_rows(lad)]))
 
     out += ["", "### Parallel efficiency", "",
-            "speed-up = t1 ÷ t2, efficiency = t1 ÷ (2 · t2) (1 = perfect use of both cores).", ""]
+            "speed-up = t1 ÷ t2, efficiency = t1 ÷ (2 · t2) (1 = perfect use of both cores): the "
+            "median over the repetitions of each one's ratio (its 1- and 2-thread runs back to "
+            "back in one process), so that the machine's drift over the run stays out of it; "
+            "the times shown are the medians.", ""]
     out.append(md_table(
-        ["benchmark", "t (1 thread)", "t (2 threads)", "speed-up", "efficiency"],
+        ["benchmark", "t (1 thread)", "t (2 threads)", "speed-up", "efficiency", "pairs"],
         [[f"`{r['benchmark']}`", human_time(r["t1_s"]), human_time(r["t2_s"]),
-          sig3(r["speedup"]), sig3(r["efficiency"])] for r in parallel_rows(benches)]))
+          sig3(r["speedup"]), sig3(r["efficiency"]), str(r["pairs"] or "medians")]
+         for r in parallel_rows(benches)]))
 
     out += ["", "### Fit time vs unavoidable query time", "",
             "unavoidable = gn_iterations × samples ÷ raw cold queries/s (same part, size and "

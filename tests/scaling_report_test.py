@@ -153,6 +153,33 @@ class ScalingReportTest(unittest.TestCase):
         self.assertAlmostEqual(b.cv, 1.0 / 11.0)  # stdev(10, 12, 11) / mean
         self.assertAlmostEqual(b.counters["queries_per_s"], 1000.0 / 11.0)
 
+    def test_efficiency_pairs_the_repetitions(self):
+        # Three processes, each running one rung at 1 then 2 threads back to back; the machine
+        # was 1.6x slower during the second, and the third's 2-thread run was lucky. Each
+        # process's ratio says 1.82 but for the lucky one; the ratio of the medians (1.3 s /
+        # 0.55 s) would claim a superlinear 2.36.
+        key = "Ladder/index/cone/tri_k:4/threads:"
+        paths = []
+        for i, (t1, t2) in enumerate(((1.0, 0.55), (1.6, 0.88), (1.3, 0.5))):
+            entries = [{"name": f"{key}{t}/real_time", "run_name": f"{key}{t}/real_time",
+                        "run_type": "iteration", "repetitions": 1, "repetition_index": 0,
+                        "iterations": 1, "real_time": ms, "cpu_time": ms, "time_unit": "s"}
+                       for t, ms in ((1, t1), (2, t2))]
+            paths.append(self.write(f"run{i}.json", {"context": {"num_cpus": 2}, "benchmarks": entries}))
+        merged = os.path.join(self.dir, "merged.json")
+        self.assertEqual(self.run_cli("merge", "-o", merged, *paths).returncode, 0)
+        _, benches = sr.load_run(merged)
+        self.assertEqual(benches[key + "1"].reals, {0: 1.0, 1: 1.6, 2: 1.3})
+        row = sr.parallel_rows(benches)[0]
+        self.assertEqual(row["pairs"], 3)
+        self.assertAlmostEqual(row["speedup"], 1.0 / 0.55)
+        self.assertAlmostEqual(row["efficiency"], 1.0 / 1.1)
+        # Aggregates alone (no repetitions to pair): the ratio of the medians.
+        _, benches = sr.load_run(self.write("agg.json", gb_json(ladder_run(sizes=(4,)))))
+        par = {r["benchmark"]: r for r in sr.parallel_rows(benches)}
+        self.assertEqual(par["Ladder/index/cone/tri_k:4"]["pairs"], 0)
+        self.assertAlmostEqual(par["Ladder/index/cone/tri_k:4"]["efficiency"], 1 / (2 * 0.55))
+
     def test_merge_bad_input(self):
         good = self.write("good.json", self.iteration_run(10.0, 100.0))
         bad = self.write("bad.json", "{ truncated")
