@@ -262,12 +262,15 @@ std::vector<LineCandidate> seed_candidates(const SurfaceIndex& index, const Seed
     // Each line's footpoints once, judged with every steering profile.
     a.start.assign(steer.size(), laid);
     a.score.assign(steer.size(), std::numeric_limits<double>::infinity());
+    // Each line's sample i starts from the previous line's (a neighbour: the next offset or
+    // turn).
+    std::vector<int> aim_hints(static_cast<std::size_t>(fine.samples), -1);
     for (const Vec3& d : dirs)
       for (double r : radii) {
         // The laid line's middle moved to offset r along the seed's normal.
         const Vec3 m = centre + (seed.point + r * seed.normal - mid0);
         const Line l{m - 0.5 * a.L0 * d, m + 0.5 * a.L0 * d};
-        const std::vector<ClosestPoint> feet = line_footpoints(index, l.a, l.b, fine.samples);
+        const std::vector<ClosestPoint> feet = line_footpoints(index, l.a, l.b, fine.samples, aim_hints);
         ++*scored;
         for (std::size_t si = 0; si < steer.size(); ++si) {
           MovabilityOptions mo = fine;

@@ -49,7 +49,11 @@ RefinedLine refine_line(const SurfaceIndex& index, const Line& start,
   };
   RefinedLine best;
   best.line = start;
-  best.movability = movability(index, start.a, start.b, mo);
+  // The best line's footpoint faces: every line tried next lies within `radius` of it, so its
+  // sample i starts from the best's sample i (hints never change an answer, only its cost).
+  const auto n = static_cast<std::size_t>(mo.samples);
+  std::vector<int> best_faces(n, -1);
+  best.movability = movability(index, start.a, start.b, mo, best_faces);
   best.score = score(best.movability);
   best.evaluated = 1;
   double radius = options.radius > 0 ? options.radius : 0.05 * L;
@@ -59,6 +63,7 @@ RefinedLine refine_line(const SurfaceIndex& index, const Line& start,
     const Vec3 n1 = u.unitOrthogonal(), n2 = u.cross(n1);
     std::vector<Movability> scores(static_cast<std::size_t>(c * c));
     std::vector<Line> lines(scores.size());
+    std::vector<int> faces(scores.size() * n);
     for (int i = 0; i < c; ++i)
       for (int j = 0; j < c; ++j) {
         const Vec2 pa = radius * sunflower(i, c), pb = radius * sunflower(j, c);
@@ -68,8 +73,11 @@ RefinedLine refine_line(const SurfaceIndex& index, const Line& start,
         lines[static_cast<std::size_t>(i * c + j)] = {mid - 0.5 * L * dir, mid + 0.5 * L * dir};
       }
     parallel_for(0, lines.size(), [&](std::size_t b, std::size_t e) {
-      for (std::size_t k = b; k < e; ++k)
-        scores[k] = movability(index, lines[k].a, lines[k].b, mo);
+      for (std::size_t k = b; k < e; ++k) {
+        const std::span<int> hints(faces.data() + k * n, n);
+        std::copy(best_faces.begin(), best_faces.end(), hints.begin());
+        scores[k] = movability(index, lines[k].a, lines[k].b, mo, hints);
+      }
     }, 8);
     best.evaluated += static_cast<int>(lines.size());
     for (std::size_t k = 0; k < lines.size(); ++k) {  // serial: ties go to the lower index
@@ -78,6 +86,7 @@ RefinedLine refine_line(const SurfaceIndex& index, const Line& start,
         best.score = sk;
         best.movability = scores[k];
         best.line = lines[k];
+        std::copy_n(faces.begin() + static_cast<std::ptrdiff_t>(k * n), n, best_faces.begin());
       }
     }
     radius *= 0.5;
