@@ -5,6 +5,7 @@
 // vectors change the calling convention without AVX (-Wpsabi).
 #pragma once
 
+#include <cstdint>
 #include <cstring>
 
 namespace flank {
@@ -38,6 +39,12 @@ inline V lane_max(V a, V b) {
 template <class V>
 inline V lane_abs(V a) {
   return lane_max(a, -a);
+}
+// Bit l set where lane l of `a` is ≤ t (four lanes).
+inline std::uint32_t lanes_at_most(Float4 a, float t) {
+  using Int4 = std::int32_t __attribute__((vector_size(16)));
+  const Int4 bits = (a <= splat<Float4>(t)) & Int4{1, 2, 4, 8};
+  return static_cast<std::uint32_t>(bits[0] | bits[1] | bits[2] | bits[3]);
 }
 
 }  // namespace flank

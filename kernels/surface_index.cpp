@@ -4,6 +4,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <bit>
 #include <cassert>
 #include <cfenv>
 #include <cmath>
@@ -555,17 +556,31 @@ void visit_leaf(const LeafPack& k, const Corners* corners, const std::vector<int
   } else {
     std::fill(d, d + LeafPack::kLanes, 0.0f);
   }
-  for (int l = 0; l < k.count; ++l)
-    if ((k.always >> l) & 1u) d[l] = 0.0f;
+  for (std::uint32_t a = k.always; a; a &= a - 1) d[std::countr_zero(a)] = 0.0f;
   const double margin = 1e-5 * reach;
+  const auto threshold = [&] {
+    const double r = std::sqrt(st.best_d2) + margin;
+    return r * r * (1.0 + 1e-6);
+  };
+  // The lanes farther than the best so far leave now, all at once: the best only shrinks, so
+  // the loop below would stop before reaching any of them. The rest are tested in the same
+  // order as before.
+  if (st.best_d2 < kInf) {
+    // d ≤ t exactly when d ≤ the largest float not above t.
+    const double t = threshold();
+    float tf = static_cast<float>(t);
+    if (static_cast<double>(tf) > t) tf = std::nextafter(tf, -std::numeric_limits<float>::infinity());
+    std::uint32_t near = 0;
+    for (int o = 0; o < LeafPack::kLanes; o += 4) near |= lanes_at_most(load_lanes<Float4>(d + o), tf) << o;
+    todo &= near;
+  }
   while (todo) {
-    int lane = -1;
-    for (int l = 0; l < k.count; ++l)
-      if (((todo >> l) & 1u) && (lane < 0 || d[l] < d[lane])) lane = l;
-    if (st.best_d2 < kInf) {
-      const double r = std::sqrt(st.best_d2) + margin;
-      if (static_cast<double>(d[lane]) > r * r * (1.0 + 1e-6)) break;
+    int lane = std::countr_zero(todo);
+    for (std::uint32_t m = todo & (todo - 1); m; m &= m - 1) {
+      const int l = std::countr_zero(m);
+      if (d[l] < d[lane]) lane = l;
     }
+    if (st.best_d2 < kInf && static_cast<double>(d[lane]) > threshold()) break;
     const std::size_t pos = static_cast<std::size_t>(k.first + lane);
     const Corners& c = corners[pos];
     st.exact(faces[pos], c.a, c.b, c.c);
