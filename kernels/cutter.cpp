@@ -144,24 +144,38 @@ Cutter Cutter::constant(CutterKind kind, double length, double radius) {
 
 namespace {
 // Least squares over basis rows given by `row(i, v)` (fills v with the basis at sample i).
+// Only the lower triangle of the normal matrix is formed (all that LDLT reads), and only from
+// a row's nonzero entries (a spline row has four of ten): basis values are finite, so a product
+// with a zero is ±0, which leaves a sum as it was (no sum here is ever −0: it starts at +0, and
+// round-to-nearest gives −0 only from −0 + −0). A is the full loop's, bit for bit.
 template <class Row>
 Cutter fit_rows(CutterKind kind, double length, std::size_t count, const std::vector<double>& radii, Row&& row) {
+  // On the stack: at most 10 × 10.
+  using Normal = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, 0, kSplineProfileCoefficients,
+                               kSplineProfileCoefficients>;
+  using Rhs = Eigen::Matrix<double, Eigen::Dynamic, 1, 0, kSplineProfileCoefficients, 1>;
   const int n = coefficient_count(kind);
-  MatX A = MatX::Zero(n, n);
-  VecX rhs = VecX::Zero(n);
+  Normal A = Normal::Zero(n, n);
+  Rhs rhs = Rhs::Zero(n);
   double v[kSplineProfileCoefficients];
+  int nonzero[kSplineProfileCoefficients];
   for (std::size_t i = 0; i < count; ++i) {
     row(i, v);
+    int m = 0;
     for (int p = 0; p < n; ++p) {
-      rhs(p) += v[p] * radii[i];
-      for (int q = 0; q < n; ++q) A(p, q) += v[p] * v[q];
+      rhs(p) += v[p] * radii[i];  // every entry: a radius may be non-finite
+      if (v[p] != 0.0) nonzero[m++] = p;
+    }
+    for (int a = 0; a < m; ++a) {
+      const int p = nonzero[a];
+      for (int b = 0; b <= a; ++b) A(p, nonzero[b]) += v[p] * v[nonzero[b]];
     }
   }
   A.diagonal().array() += 1e-12 * (1.0 + A.diagonal().maxCoeff());
   Cutter c;
   c.kind = kind;
   c.length = length;
-  c.coeffs = A.ldlt().solve(rhs);
+  c.coeffs = Eigen::LDLT<Normal>(A).solve(rhs);
   return c;
 }
 }  // namespace

@@ -2,6 +2,9 @@
 
 #include <gtest/gtest.h>
 
+#include <cmath>
+#include <vector>
+
 #include "kernels/cutter.h"
 
 namespace flank {
@@ -78,6 +81,44 @@ TEST(Cutter, FitIsExactForItsOwnKind) {
   Cutter steep = cone_from_end_radii(1.0, 1.0, 10.0);
   steep.coeffs << 1.0, 3.0;
   EXPECT_FALSE(steep.valid());
+}
+
+// The fit forms only the lower triangle of its normal matrix, from each row's nonzero basis
+// entries; its coefficients must be those of the plain dense assembly, bit for bit (the
+// candidate search's choices hang on them), for every kind, from the table and from s.
+TEST(Cutter, FitEqualsTheDenseNormalEquationsBitForBit) {
+  std::vector<double> s;
+  for (int i = 0; i < 30; ++i) s.push_back((i + 0.5) / 30);
+  std::vector<int> rows;
+  for (int i = 29; i >= 0; i -= 2) rows.push_back(i);  // a subset, not in order
+  for (CutterKind kind : {CutterKind::cylinder, CutterKind::cone, CutterKind::barrel, CutterKind::spline}) {
+    const ProfileTable table = profile_table(kind, s);
+    const int n = coefficient_count(kind);
+    for (int trial = 0; trial < 20; ++trial) {
+      std::vector<double> radii, at;
+      for (int r : rows) {
+        radii.push_back(3.0 + std::sin(0.7 * r + trial) + 1e-3 * trial * r);
+        at.push_back(s[static_cast<std::size_t>(r)]);
+      }
+      MatX A = MatX::Zero(n, n);
+      VecX rhs = VecX::Zero(n);
+      for (std::size_t i = 0; i < rows.size(); ++i) {
+        for (int p = 0; p < n; ++p) {
+          rhs(p) += table.value(rows[i], p) * radii[i];
+          for (int q = 0; q < n; ++q) A(p, q) += table.value(rows[i], p) * table.value(rows[i], q);
+        }
+      }
+      A.diagonal().array() += 1e-12 * (1.0 + A.diagonal().maxCoeff());
+      const VecX dense = A.ldlt().solve(rhs);
+      const Cutter from_table = Cutter::fit(table, 40.0, rows, radii);
+      const Cutter from_s = Cutter::fit(kind, 40.0, at, radii);
+      ASSERT_EQ(from_table.coeffs.size(), n);
+      for (int k = 0; k < n; ++k) {
+        EXPECT_EQ(from_table.coeffs(k), dense(k)) << to_string(kind) << " trial " << trial << " k " << k;
+        EXPECT_EQ(from_s.coeffs(k), dense(k)) << to_string(kind) << " trial " << trial << " k " << k;
+      }
+    }
+  }
 }
 
 }  // namespace
