@@ -566,10 +566,11 @@ void visit_leaf(const LeafPack& k, const Corners* corners, const std::vector<int
   // the loop below would stop before reaching any of them. The rest are tested in the same
   // order as before.
   if (st.best_d2 < kInf) {
-    // d ≤ t exactly when d ≤ the largest float not above t.
+    // d ≤ t exactly when d ≤ the largest float not above t (t > 0: the float below a
+    // positive float, +∞ included, is the one whose bits are one less).
     const double t = threshold();
     float tf = static_cast<float>(t);
-    if (static_cast<double>(tf) > t) tf = std::nextafter(tf, -std::numeric_limits<float>::infinity());
+    if (static_cast<double>(tf) > t) tf = std::bit_cast<float>(std::bit_cast<std::uint32_t>(tf) - 1u);
     std::uint32_t near = 0;
     for (int o = 0; o < LeafPack::kLanes; o += 4) near |= lanes_at_most(load_lanes<Float4>(d + o), tf) << o;
     todo &= near;
