@@ -153,5 +153,24 @@ BENCHMARK(BM_SurfaceIndexBuild)
     ->UseRealTime()
     ->Unit(benchmark::kMillisecond);
 
+// The index Ω gets for its bounded queries (SurfaceIndex::within_reach: the faces' adjacency
+// and a cell table), built once for each patch the finish stage evaluates: a sheet of
+// 26k triangles like a patch's Ω, reach 0.5 mm. Args: {threads}.
+void BM_SurfaceIndexWithinReach(benchmark::State& state) {
+  const ThreadLimit limit(static_cast<int>(state.range(0)));
+  const Mesh mesh = wavy_grid(26);
+  for (auto _ : state) {
+    SurfaceIndex index = SurfaceIndex::within_reach(mesh, 0.5);
+    benchmark::DoNotOptimize(&index);
+  }
+  state.SetItemsProcessed(state.iterations() * mesh.face_count());
+}
+BENCHMARK(BM_SurfaceIndexWithinReach)
+    ->ArgNames({"threads"})
+    ->Arg(1)
+    ->Arg(2)
+    ->UseRealTime()
+    ->Unit(benchmark::kMillisecond);
+
 }  // namespace
 }  // namespace flank

@@ -729,12 +729,34 @@ SurfaceIndex::SurfaceIndex(const Mesh& mesh, QueryEngine engine, double reach)
       corners[f] = {mesh.V.row(mesh.F(fi, 0)), mesh.V.row(mesh.F(fi, 1)), mesh.V.row(mesh.F(fi, 2))};
     }
   }, 4096);
+  if (m.engine == QueryEngine::kCells) {
+    // An index for a few bounded queries (Ω's): its two builds are mostly serial, the faces'
+    // adjacency after a parallel sort and the cell table, and independent, so they run side
+    // by side. Each writes its own members; the result does not depend on which ends first.
+    const double grow = reach * (1.0 + 1e-9) + 1e-12 * scale;
+    parallel_invoke_each(2, [&](std::size_t task) {
+      if (task == 0) {
+        const Buffer<KeyedIndex> edges = sorted_edge_slots(mesh);
+        // Through the flag, so that masked queries find it done.
+        std::call_once(m.subset_once, [&] { m.build_subset_adjacency(edges, true); });
+        return;
+      }
+      // Each face's box grown by the reach (a little wider, and by the coordinates'
+      // rounding): a point within the reach of a face lies in the grown box.
+      std::vector<Vec3> lo(static_cast<std::size_t>(nf)), hi(static_cast<std::size_t>(nf));
+      for (std::size_t f = 0; f < corners.size(); ++f) {
+        const Corners& c = corners[f];
+        lo[f] = (c.a.cwiseMin(c.b).cwiseMin(c.c).array() - grow).matrix();
+        hi[f] = (c.a.cwiseMax(c.b).cwiseMax(c.c).array() + grow).matrix();
+      }
+      m.cells = CellGrid(lo, hi);
+    });
+    m.face_corners = std::move(corners);
+    return;
+  }
   {
     const Buffer<KeyedIndex> edges = sorted_edge_slots(mesh);
-    if (m.engine == QueryEngine::kCells)  // through the flag, so that masked queries find it done
-      std::call_once(m.subset_once, [&] { m.build_subset_adjacency(edges, true); });
-    else
-      m.build_boundary(edges);
+    m.build_boundary(edges);
   }
   if (m.engine == QueryEngine::kEmbree) {
     m.triangles.resize(corners.size());
@@ -754,18 +776,6 @@ SurfaceIndex::SurfaceIndex(const Mesh& mesh, QueryEngine engine, double reach)
                                           std::abs(t.normal.dot(t.c - t.centre))}) + m.on_surface;
     }
     m.build_scene();
-  } else if (m.engine == QueryEngine::kCells) {
-    // Each face's box grown by the reach (a little wider, and by the coordinates' rounding):
-    // a point within the reach of a face lies in the grown box.
-    const double grow = reach * (1.0 + 1e-9) + 1e-12 * scale;
-    std::vector<Vec3> lo(static_cast<std::size_t>(nf)), hi(static_cast<std::size_t>(nf));
-    for (std::size_t f = 0; f < corners.size(); ++f) {
-      const Corners& c = corners[f];
-      lo[f] = (c.a.cwiseMin(c.b).cwiseMin(c.c).array() - grow).matrix();
-      hi[f] = (c.a.cwiseMax(c.b).cwiseMax(c.c).array() + grow).matrix();
-    }
-    m.cells = CellGrid(lo, hi);
-    m.face_corners = std::move(corners);
   } else {
     m.build_tree(corners, 1e-12 * scale);
   }
