@@ -330,16 +330,16 @@ def scoring_rows(lad):
     return rows
 
 
-def paired_ratio(t1s, t2s):
-    """Median over the repetitions both have of t1_i / t2_i, and how many; (None, 0) with
-    fewer than two. The machine's speed drifts by tens of percent over a run; the 1- and
+def paired(t1s, t2s, formula):
+    """Median over the repetitions both have of formula(t1_i, t2_i), and how many; (None, 0)
+    with fewer than two. The machine's speed drifts by tens of percent over a run; the 1- and
     2-thread runs of one repetition ran back to back, so their ratio does not see the drift
     that a ratio of medians taken minutes apart does."""
     common = sorted(set(t1s) & set(t2s))
-    ratios = [t1s[i] / t2s[i] for i in common if t2s[i] > 0]
-    if len(ratios) < 2 or len(ratios) != len(common):
+    values = [formula(t1s[i], t2s[i]) for i in common]
+    if len(values) < 2 or any(v is None for v in values):
         return None, 0
-    return statistics.median(ratios), len(ratios)
+    return statistics.median(values), len(values)
 
 
 def parallel_rows(benches):
@@ -355,13 +355,13 @@ def parallel_rows(benches):
         b2 = benches.get(base + "/threads:2")
         if b2 is None:
             continue
-        paired, pairs = paired_ratio(b1.reals, b2.reals)
-        ratio = paired if pairs else speedup(b1.real_s, b2.real_s)
-        rows.append({
-            "benchmark": base, "stage": b1.stage, "part": b1.part, "tri_k": b1.tri_k,
-            "triangles": b1.triangles, "t1_s": b1.real_s, "t2_s": b2.real_s,
-            "speedup": ratio, "efficiency": None if ratio is None else ratio / 2, "pairs": pairs,
-        })
+        row = {"benchmark": base, "stage": b1.stage, "part": b1.part, "tri_k": b1.tri_k,
+               "triangles": b1.triangles, "t1_s": b1.real_s, "t2_s": b2.real_s, "pairs": 0}
+        for name, formula in (("speedup", speedup), ("efficiency", parallel_efficiency)):
+            value, pairs = paired(b1.reals, b2.reals, formula)
+            row[name] = value if pairs else formula(b1.real_s, b2.real_s)
+            row["pairs"] = pairs
+        rows.append(row)
     return rows
 
 
