@@ -37,6 +37,19 @@ int coefficient_count(CutterKind kind) {
   return 1;
 }
 
+namespace {
+const std::vector<double>& spline_profile_knots() {
+  static const std::vector<double> knots = clamped_uniform_knots(kSplineProfileCoefficients);
+  return knots;
+}
+}  // namespace
+
+std::vector<double> profile_breaks(CutterKind kind) {
+  if (kind != CutterKind::spline) return {};
+  const std::vector<double>& k = spline_profile_knots();
+  return {k.begin() + kSplineDegree + 1, k.end() - kSplineDegree - 1};
+}
+
 void profile_basis(CutterKind kind, double s, double* value, double* derivative) {
   switch (kind) {
     case CutterKind::cylinder:
@@ -52,8 +65,7 @@ void profile_basis(CutterKind kind, double s, double* value, double* derivative)
       derivative[0] = -2 * (1 - s), derivative[1] = 2 - 4 * s, derivative[2] = 2 * s;
       return;
     case CutterKind::spline: {
-      static const std::vector<double> knots = clamped_uniform_knots(kSplineProfileCoefficients);
-      const BasisRow row = cubic_basis(knots, kSplineProfileCoefficients, s);
+      const BasisRow row = cubic_basis(spline_profile_knots(), kSplineProfileCoefficients, s);
       for (int k = 0; k < kSplineProfileCoefficients; ++k) value[k] = derivative[k] = 0.0;
       for (int k = 0; k <= kSplineDegree; ++k) {
         value[row.first + k] = row.value[k];

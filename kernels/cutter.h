@@ -19,6 +19,10 @@ std::string_view to_string(CutterKind kind);
 bool parse_cutter_kind(std::string_view text, CutterKind* kind);
 int coefficient_count(CutterKind kind);
 
+// Where the profile d(s) of `kind` changes polynomial piece: sorted, inside (0, 1) (none but
+// for a spline).
+std::vector<double> profile_breaks(CutterKind kind);
+
 // Basis row P(s) (coefficient_count entries) and its s-derivative.
 void profile_basis(CutterKind kind, double s, double* value, double* derivative);
 

@@ -1,5 +1,6 @@
 #include "report/write_step.h"
 
+#include <algorithm>
 #include <cmath>
 #include <exception>
 #include <limits>
@@ -21,13 +22,15 @@ constexpr int kProfileSamples = 101;  // the meridian samples of patches.json's 
 
 namespace {
 
-// The n × count basis matrix of the clamped cubic B-spline with `count` control points at the
-// uniform parameters k / (n − 1): 4 entries a row.
-Eigen::SparseMatrix<double> basis_matrix(int n, int count) {
-  const std::vector<double> knots = clamped_uniform_knots(count);
+// The n × count basis matrix of the cubic B-spline on `knots` (clamped, over [lo, hi]) at the n
+// uniform parameters lo + (hi − lo) k / (n − 1): 4 entries a row.
+Eigen::SparseMatrix<double> basis_matrix(int n, const std::vector<double>& knots) {
+  const int count = static_cast<int>(knots.size()) - kSplineDegree - 1;
+  const double lo = knots.front(), hi = knots.back();
   std::vector<Eigen::Triplet<double>> entries;
   for (int k = 0; k < n; ++k) {
-    const BasisRow row = cubic_basis(knots, count, k / static_cast<double>(n - 1));
+    const double x = k + 1 == n ? hi : lo + (hi - lo) * (k / static_cast<double>(n - 1));
+    const BasisRow row = cubic_basis(knots, count, x);
     for (int c = 0; c <= kSplineDegree; ++c) entries.emplace_back(k, row.first + c, row.value[static_cast<std::size_t>(c)]);
   }
   Eigen::SparseMatrix<double> B(n, count);
@@ -35,8 +38,6 @@ Eigen::SparseMatrix<double> basis_matrix(int n, int count) {
   return B;
 }
 
-// The tensor-product least-squares surface: on a full grid it separates, poles = Bu⁺ P Bv⁺ᵀ
-// per coordinate, each factor from banded normal equations.
 // Clamped uniform knots for `count` poles over [lo, hi].
 std::vector<double> knots_over(int count, double lo, double hi) {
   std::vector<double> k = clamped_uniform_knots(count);
@@ -45,27 +46,59 @@ std::vector<double> knots_over(int count, double lo, double hi) {
   return k;
 }
 
+// Clamped cubic knots over [lo, hi] ⊂ [0, 1] at the exact surface's `breaks` (sorted, inside
+// (0, 1)), each of multiplicity two. At a break the surface changes polynomial piece (the
+// motion's along t, a spline cutter's profile along s) and its curvature may jump: a double
+// knot (a C¹ join) follows that, where simple knots converge slowly around it. Breaks nearer
+// to lo or hi than half the shortest piece are left out (a sliver span holds no sample).
+std::vector<double> piece_knots(const std::vector<double>& breaks, double lo, double hi) {
+  double shortest = 1.0, last = 0.0;
+  for (const double b : breaks) shortest = std::min(shortest, b - last), last = b;
+  shortest = std::min(shortest, 1.0 - last);
+  std::vector<double> k(kSplineDegree + 1, lo);
+  for (const double b : breaks)
+    if (b - lo >= 0.5 * shortest && hi - b >= 0.5 * shortest) k.insert(k.end(), 2, b);
+  k.insert(k.end(), kSplineDegree + 1, hi);
+  return k;
+}
+
 // A fitted surface before it becomes OCCT's: its poles (nu × nv, row-major, rows along u) on
-// clamped uniform knots, and its deviation from the exact points.
+// clamped knots (over the face's domain), and its deviation from the exact points.
 struct PoleGrid {
   Points poles;
   int nu = 0, nv = 0;
+  std::vector<double> knots_u, knots_v;
   double deviation = 0.0;
 };
 
-PoleGrid least_squares(const std::string& name, const Points& grid, int rows, int cols, int nu, int nv) {
-  const Eigen::SparseMatrix<double> Bu = basis_matrix(rows, nu), Bv = basis_matrix(cols, nv);
-  const Eigen::SparseMatrix<double> Nu = Bu.transpose() * Bu, Nv = Bv.transpose() * Bv;
-  const Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> su(Nu), sv(Nv);
-  if (su.info() != Eigen::Success || sv.info() != Eigen::Success)
-    throw io::Error(name + ": the B-spline fit is singular");
-  PoleGrid g{Points(static_cast<Eigen::Index>(nu) * nv, 3), nu, nv, 0.0};
+int pole_count(const std::vector<double>& knots) { return static_cast<int>(knots.size()) - kSplineDegree - 1; }
+
+// The banded normal equations of one direction's least squares: B and a factorisation of BᵀB.
+struct Direction {
+  Eigen::SparseMatrix<double> B;
+  Eigen::SimplicialLDLT<Eigen::SparseMatrix<double>> normal;
+  Direction(int n, const std::vector<double>& knots) : B(basis_matrix(n, knots)) {
+    normal.compute(Eigen::SparseMatrix<double>(B.transpose() * B));
+  }
+  bool ok() const { return normal.info() == Eigen::Success; }
+  // The poles (count × m) whose curves fit the columns of P (n × m) in least squares.
+  Eigen::MatrixXd solve(const Eigen::MatrixXd& P) const { return normal.solve(Eigen::MatrixXd(B.transpose() * P)); }
+};
+
+// The tensor-product least-squares surface: on a full grid it separates, poles = Bu⁺ P Bv⁺ᵀ
+// per coordinate, each factor from banded normal equations.
+PoleGrid least_squares(const std::string& name, const Points& grid, int rows, int cols, std::vector<double> knots_u,
+                       std::vector<double> knots_v) {
+  const int nu = pole_count(knots_u), nv = pole_count(knots_v);
+  const Direction u(rows, knots_u), v(cols, knots_v);
+  if (!u.ok() || !v.ok()) throw io::Error(name + ": the B-spline fit is singular");
+  PoleGrid g{Points(static_cast<Eigen::Index>(nu) * nv, 3), nu, nv, std::move(knots_u), std::move(knots_v), 0.0};
   for (int c = 0; c < 3; ++c) {
     Eigen::MatrixXd P(rows, cols);
     for (int i = 0; i < rows; ++i)
       for (int j = 0; j < cols; ++j) P(i, j) = grid(static_cast<Eigen::Index>(i) * cols + j, c);
-    const Eigen::MatrixXd along_u = su.solve(Eigen::MatrixXd(Bu.transpose() * P));                  // nu × cols
-    const Eigen::MatrixXd both = sv.solve(Eigen::MatrixXd(Bv.transpose() * along_u.transpose())).transpose();  // nu × nv
+    const Eigen::MatrixXd along_u = u.solve(P);                                // nu × cols
+    const Eigen::MatrixXd both = v.solve(along_u.transpose()).transpose();     // nu × nv
     for (int i = 0; i < nu; ++i)
       for (int j = 0; j < nv; ++j) g.poles(static_cast<Eigen::Index>(i) * nv + j, c) = both(i, j);
   }
@@ -79,7 +112,7 @@ PoleGrid least_squares(const std::string& name, const Points& grid, int rows, in
 // the knots again, which made measuring 80% of the fit on large faces.
 double deviation(const PoleGrid& g, const Points& fine, int rows, int cols) {
   const int fine_rows = 2 * rows - 1, fine_cols = 2 * cols - 1;
-  const Eigen::SparseMatrix<double> Bu = basis_matrix(fine_rows, g.nu), Bv = basis_matrix(fine_cols, g.nv);
+  const Eigen::SparseMatrix<double> Bu = basis_matrix(fine_rows, g.knots_u), Bv = basis_matrix(fine_cols, g.knots_v);
   Eigen::MatrixXd squared = Eigen::MatrixXd::Zero(fine_rows, fine_cols);
   for (int c = 0; c < 3; ++c) {
     Eigen::MatrixXd P(g.nu, g.nv);
@@ -96,42 +129,117 @@ double deviation(const PoleGrid& g, const Points& fine, int rows, int cols) {
   return std::sqrt(squared.maxCoeff());
 }
 
-// Half as many poles as grid points first (a lighter file), then more; the first that meets
-// `target` at every fine point, else the more accurate. The second has one pole per point (it
-// interpolates) only up to 24 points: at uniform parameters the collocation matrix of a cubic
-// with uniform knots and as many poles as points has a condition number that grows about
-// 1.17 times a point (66 at 24 points, 1e13 at 200, exactly singular in double at 324, which
-// a Rotor 67 patch hit); beyond, four fifths as many poles as points, whose condition stays
-// under 9 for every count up to 420 tried (half: under 5).
-PoleGrid fit_poles(const std::string& name, const Points& fine, int rows, int cols, double target) {
+// Knots along one direction with which every curve of the grid along it (the columns when
+// `along_rows` is false: curves along u through the coarse columns) is fitted within `target`
+// at every fine parameter: the surface's pieces (piece_knots) first, then each span where
+// some curve misses split in two, until none misses. nullopt when a span that misses can no
+// longer be split, or the poles would outnumber four fifths of the points (as the densest
+// uniform fit below): beyond, least squares loses its hold on the points. Where the error is
+// (near Ω's ends, where the envelope turns fast) is where the knots go: Rotor 67 lower's
+// twelve faces took 9k poles this way where uniform knots took 226k.
+std::optional<std::vector<double>> direction_knots(const Points& fine, int rows, int cols, bool along_rows,
+                                                   const std::vector<double>& breaks, double lo, double hi,
+                                                   double target) {
+  const int fine_cols = 2 * cols - 1;
+  const int n = along_rows ? cols : rows, m = along_rows ? rows : cols;  // points along, curves
+  const auto at = [&](int fine_along, int curve, int c) {
+    const int i = along_rows ? 2 * curve : fine_along, j = along_rows ? fine_along : 2 * curve;
+    return fine(static_cast<Eigen::Index>(i) * fine_cols + j, c);
+  };
+  const double spacing = (hi - lo) / (n - 1);
+  std::vector<double> knots = piece_knots(breaks, lo, hi);
+  for (;;) {
+    if (pole_count(knots) > std::max(4, (4 * n) / 5)) return std::nullopt;
+    const Direction d(n, knots);
+    if (!d.ok()) return std::nullopt;
+    const Eigen::SparseMatrix<double> fine_basis = basis_matrix(2 * n - 1, knots);
+    Eigen::MatrixXd squared = Eigen::MatrixXd::Zero(2 * n - 1, m);
+    for (int c = 0; c < 3; ++c) {
+      Eigen::MatrixXd P(n, m);
+      for (int a = 0; a < n; ++a)
+        for (int b = 0; b < m; ++b) P(a, b) = at(2 * a, b, c);
+      const Eigen::MatrixXd on = fine_basis * d.solve(P);  // (2n − 1) × m
+      for (int a = 0; a < 2 * n - 1; ++a)
+        for (int b = 0; b < m; ++b) {
+          const double e = on(a, b) - at(a, b, c);
+          squared(a, b) += e * e;
+        }
+    }
+    const Eigen::VectorXd worst = squared.rowwise().maxCoeff();
+    if (std::sqrt(worst.maxCoeff()) <= target) return knots;
+    // Split every span holding a fine parameter that misses (a parameter on a knot: both sides).
+    std::vector<double> split;
+    for (std::size_t k = kSplineDegree; k + kSplineDegree + 1 < knots.size(); ++k) {
+      const double k0 = knots[k], k1 = knots[k + 1];
+      if (!(k1 > k0)) continue;
+      const int a0 = static_cast<int>(std::floor((k0 - lo) / (hi - lo) * (2 * n - 2)));
+      const int a1 = static_cast<int>(std::ceil((k1 - lo) / (hi - lo) * (2 * n - 2)));
+      bool misses = false;
+      for (int a = std::max(0, a0); a <= std::min(2 * n - 2, a1) && !misses; ++a) misses = worst(a) > target * target;
+      if (!misses) continue;
+      if (k1 - k0 < 2.0 * spacing) return std::nullopt;
+      split.push_back(0.5 * (k0 + k1));
+    }
+    knots.insert(knots.end(), split.begin(), split.end());
+    std::sort(knots.begin(), knots.end());
+  }
+}
+
+// First knots that follow the exact surface's pieces and its error (direction_knots, half of
+// `target` along each direction); then, if that surface misses `target`, half as many poles
+// as grid points on uniform knots, then more. The first that meets `target` at every fine point,
+// else the most accurate. The uniform fit with one pole per point interpolates only up to 24
+// points: at uniform parameters the collocation matrix of a cubic with uniform knots and as
+// many poles as points has a condition number that grows about 1.17 times a point (66 at 24
+// points, 1e13 at 200, exactly singular in double at 324, which a Rotor 67 patch hit); beyond,
+// four fifths as many poles as points, whose condition stays under 9 for every count up to 420
+// tried (half: under 5).
+PoleGrid fit_poles(const std::string& name, const Points& fine, int rows, int cols, double target,
+                   const FaceDomain& domain, const FaceBreaks& breaks) {
   const int fine_cols = 2 * cols - 1;
   Points grid(static_cast<Eigen::Index>(rows) * cols, 3);
   for (int i = 0; i < rows; ++i)
     for (int j = 0; j < cols; ++j)
       grid.row(static_cast<Eigen::Index>(i) * cols + j) = fine.row(static_cast<Eigen::Index>(2 * i) * fine_cols + 2 * j);
+  std::optional<PoleGrid> best;
+  const auto consider = [&](PoleGrid g) {
+    g.deviation = deviation(g, fine, rows, cols);
+    if (!best || g.deviation < best->deviation) best = std::move(g);
+    return best->deviation <= target;
+  };
+  const std::optional<std::vector<double>> ku =
+      direction_knots(fine, rows, cols, false, breaks.t, domain.t0, domain.t1, 0.5 * target);
+  const std::optional<std::vector<double>> kv =
+      ku ? direction_knots(fine, rows, cols, true, breaks.s, domain.s0, domain.s1, 0.5 * target) : std::nullopt;
+  if (ku && kv && consider(least_squares(name, grid, rows, cols, *ku, *kv))) return *best;
   const auto poles = [](int points, bool more) {
     const int half = std::max(4, (points + 1) / 2);
     return more ? std::min(points, std::max({half, 24, static_cast<int>(std::ceil(0.8 * points))})) : half;
   };
-  PoleGrid best = least_squares(name, grid, rows, cols, poles(rows, false), poles(cols, false));
-  best.deviation = deviation(best, fine, rows, cols);
-  if (best.deviation <= target) return best;
-  PoleGrid full = least_squares(name, grid, rows, cols, poles(rows, true), poles(cols, true));
-  full.deviation = deviation(full, fine, rows, cols);
-  return full.deviation < best.deviation ? full : best;
+  for (const bool more : {false, true})
+    if (consider(least_squares(name, grid, rows, cols, knots_over(poles(rows, more), domain.t0, domain.t1),
+                               knots_over(poles(cols, more), domain.s0, domain.s1))))
+      break;
+  return *best;
 }
 
-FittedSurface to_surface(const std::string& name, const PoleGrid& g, const FaceDomain& domain) {
-  return {io::SplineSurface::from_poles(name, g.poles, g.nu, g.nv, knots_over(g.nu, domain.t0, domain.t1),
-                                        knots_over(g.nv, domain.s0, domain.s1)),
-          g.deviation};
+FittedSurface to_surface(const std::string& name, const PoleGrid& g) {
+  return {io::SplineSurface::from_poles(name, g.poles, g.nu, g.nv, g.knots_u, g.knots_v), g.deviation};
 }
 
 }  // namespace
 
+FaceBreaks face_breaks(const Patch& p) {
+  FaceBreaks b;
+  for (const double k : p.motion.knots)
+    if (k > 0.0 && k < 1.0 && (b.t.empty() || k > b.t.back())) b.t.push_back(k);
+  b.s = profile_breaks(p.cutter.kind);
+  return b;
+}
+
 FittedSurface fit_exact_grid(const std::string& name, const Points& fine, int rows, int cols, double target,
-                             const FaceDomain& domain) {
-  return to_surface(name, fit_poles(name, fine, rows, cols, target), domain);
+                             const FaceDomain& domain, const FaceBreaks& breaks) {
+  return to_surface(name, fit_poles(name, fine, rows, cols, target, domain, breaks));
 }
 
 bool exact_omega_grid(const Patch& p, int& rows, int& cols, Points& fine, FaceDomain* domain, int margin) {
@@ -258,11 +366,12 @@ std::vector<WrittenFace> write_patches_step(const std::filesystem::path& path, c
   parallel_invoke_each(patches.size(), [&](std::size_t k) {
     const Patch& p = patches[k];
     Fitted& out = fitted[k];
+    const FaceBreaks breaks = face_breaks(p);
     try {
-      // Ω's grid in the evaluation's (t, s) samples, then up to eight times as many rows
-      // (along the motion, where a fitted motion's knots leave kinks) and columns, until the
-      // face is within 1/150 of the tolerance (a margin under the 1% promised); else the
-      // closest. Where Ω ends inside the grid, a face that misses the target is first tried
+      // Ω's grid in the evaluation's (t, s) samples, then up to eight times as many rows and
+      // columns (more points to hold more knots, where the face needs more poles than four
+      // fifths of the grid's points), until the face is within 1/150 of the tolerance (a
+      // margin under the 1% promised); else the closest. Where Ω ends inside the grid, a face that misses the target is first tried
       // again at the same density kept 1, 2, 4, 8 envelope rows (columns) farther from that
       // end: the kink where Ω ends is what a denser grid then fits slowly (the noisy barrel's
       // second patch went to 3001 × 1257 points, 1/75 of the tolerance, where one row off
@@ -275,7 +384,8 @@ std::vector<WrittenFace> write_patches_step(const std::filesystem::path& path, c
           FaceDomain domain;
           if (!exact_omega_grid(p, rows, cols, fine, &domain, margin)) break;
           const bool trimmed = domain.t0 > 0.0 || domain.t1 < 1.0 || domain.s0 > 0.0 || domain.s1 < 1.0;
-          PoleGrid g = fit_poles(file + ": patch " + std::to_string(p.id), fine, rows, cols, tolerance / 150.0);
+          PoleGrid g =
+              fit_poles(file + ": patch " + std::to_string(p.id), fine, rows, cols, tolerance / 150.0, domain, breaks);
           if (!out.best || g.deviation < out.best->deviation) out.best = std::move(g), out.domain = domain;
           met = out.best->deviation <= tolerance / 150.0;
           if (met || !trimmed) break;
@@ -294,8 +404,7 @@ std::vector<WrittenFace> write_patches_step(const std::filesystem::path& path, c
     if (!fitted[k].best) continue;
     const std::string name = face_name(patches[k]);
     written[k] = {fitted[k].best->deviation, fitted[k].domain};
-    faces.push_back({name, to_surface(file + ": patch " + std::to_string(patches[k].id), *fitted[k].best,
-                                      fitted[k].domain).surface});
+    faces.push_back({name, to_surface(file + ": patch " + std::to_string(patches[k].id), *fitted[k].best).surface});
   }
   io::write_surfaces(path, faces);
   return written;

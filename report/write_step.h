@@ -24,14 +24,22 @@ struct FaceDomain {
   double t0 = 0.0, t1 = 1.0, s0 = 0.0, s1 = 1.0;
 };
 
-// Fits a clamped cubic B-spline surface (least squares, tensor product, uniform knots over
-// `domain`) to the even points of `fine`, a (2·rows − 1) × (2·cols − 1) grid of exact surface
-// points (row-major) uniform over the domain, and measures its deviation from every fine
-// point (grid points, edge midpoints and cell centres) at the same parameters: an upper bound
-// on the distance between the two surfaces there. Takes half as many poles as grid points when
-// that meets `target`, else more. Throws io::Error(name: …).
+// Where the exact surface changes polynomial piece, along t (the motion's interior knots) and
+// along s (a spline cutter's): sorted, inside (0, 1).
+struct FaceBreaks {
+  std::vector<double> t, s;
+};
+FaceBreaks face_breaks(const Patch& p);
+
+// Fits a clamped cubic B-spline surface (least squares, tensor product, over `domain`) to the
+// even points of `fine`, a (2·rows − 1) × (2·cols − 1) grid of exact surface points (row-major)
+// uniform over the domain, and measures its deviation from every fine point (grid points, edge
+// midpoints and cell centres) at the same parameters: an upper bound on the distance between
+// the two surfaces there. Knots first follow the surface's pieces (`breaks`, each a double
+// knot), as few as meet `target`; else half as many poles as grid points on uniform knots,
+// else more. Throws io::Error(name: …).
 FittedSurface fit_exact_grid(const std::string& name, const Points& fine, int rows, int cols,
-                             double target, const FaceDomain& domain = {});
+                             double target, const FaceDomain& domain = {}, const FaceBreaks& breaks = {});
 
 // Ω of patch `p` sampled exactly (forward model), on the side its envelope grid took, on a
 // (2·rows − 1) × (2·cols − 1) grid uniform over (t, s) ∈ [0, 1]², cut down to the rows and
