@@ -19,7 +19,8 @@ Cases:
 
 Every case also requires: each patch's reported max |e| agrees with the rebuild within 10% of
 the tolerance; every cutter's sphere radii (101 samples) lie within the allowed range written in
-patches.json; on a clean part no patch gouges the part beyond the tolerance.
+patches.json; on a clean part no patch gouges the part beyond the tolerance; every face of
+patches.step, read from the file by tests/check_step.py, lies within 1% of the tolerance of Ω.
 
 Usage: decompose_acceptance.py --flank BIN [--work DIR] CASE [ARGS...]
 Prints one summary line; exit 0 when the case holds, 1 when it does not, 2 on bad usage.
