@@ -8,10 +8,13 @@
 #include <cmath>
 #include <cstdlib>
 #include <cstdio>
+#include <exception>
 #include <fstream>
 #include <sstream>
+#include <vector>
 
 #include "io/cad.h"
+#include "kernels/parallel.h"
 #include "report/write_html.h"
 #include "report/write_step.h"
 #include "io/read_lines.h"
@@ -272,15 +275,37 @@ void write_outputs(io::OutputSet& out, const PatchArgs& a, const Design& design,
   std::error_code ec;
   const std::uintmax_t bytes = std::filesystem::file_size(std::filesystem::path(a.mesh), ec);
   run.input_bytes = ec ? -1 : static_cast<long long>(bytes);
-  if (!a.no_report) report::write_report_html(out.staged("report.html"), run, patches, mesh, vertex_patch);
-  for (const report::WrittenFace& f : report::write_patches_step(out.staged("patches.step"), patches, tolerance))
-    run.nurbs.push_back({f.deviation, f.domain.t0, f.domain.t1, f.domain.s0, f.domain.s1});
-  report::write_tools_step(out.staged("tools.step"), patches);
-  report::write_patches_json(out.staged("patches.json"), run, patches);
-  report::write_envelopes_ply(out.staged("envelopes.ply"), patches, tolerance);
-  report::write_design_ply(out.staged("design.ply"), mesh, vertex_patch);
-  report::write_toolpath_apt(out.staged("toolpath.apt"), patches, a.apt_steps,
-                         std::filesystem::path(a.mesh).stem().string());
+  // The files are independent but for patches.json, which records patches.step's fitted
+  // faces: Open CASCADE's two writers and then patches.json run as one chain (OCCT's writers
+  // share global settings), each of our own writers beside it. Each file's bytes do not depend
+  // on which runs first; a failure is reported as the first failing file in this order.
+  const report::RunInfo before_step = run;
+  const std::string stem = std::filesystem::path(a.mesh).stem().string();
+  const std::vector<std::function<void()>> writers{
+      [&] {
+        for (const report::WrittenFace& f : report::write_patches_step(out.staged("patches.step"), patches, tolerance))
+          run.nurbs.push_back({f.deviation, f.domain.t0, f.domain.t1, f.domain.s0, f.domain.s1});
+        report::write_tools_step(out.staged("tools.step"), patches);
+        report::write_patches_json(out.staged("patches.json"), run, patches);
+      },
+      [&] {
+        if (!a.no_report)
+          report::write_report_html(out.staged("report.html"), before_step, patches, mesh, vertex_patch);
+      },
+      [&] { report::write_envelopes_ply(out.staged("envelopes.ply"), patches, tolerance); },
+      [&] { report::write_design_ply(out.staged("design.ply"), mesh, vertex_patch); },
+      [&] { report::write_toolpath_apt(out.staged("toolpath.apt"), patches, a.apt_steps, stem); },
+  };
+  std::vector<std::exception_ptr> failed(writers.size());
+  parallel_invoke_each(writers.size(), [&](std::size_t k) {
+    try {
+      writers[k]();
+    } catch (...) {
+      failed[k] = std::current_exception();
+    }
+  });
+  for (const std::exception_ptr& e : failed)
+    if (e) std::rethrow_exception(e);
   out.commit();
 }
 
