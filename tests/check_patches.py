@@ -20,7 +20,8 @@ Definitions (the contract; derived here from first principles, not from the C++)
 * Sphere radius d(s): scipy CubicSpline through the (s, d) samples with the default
   *not-a-knot* end condition, because it reproduces polynomials up to degree 3 exactly
   (cylinder, cone, barrel cutters are exact; a natural spline would bend the ends of a
-  barrel's parabola).  d'(s) = dd/ds with s in [0,1] (so |R_s| = |b-a| ~ L).
+  barrel's parabola). A spline cutter's d(s) is its coefficients' cubic B-spline on clamped
+  uniform knots instead, when that reproduces the samples to 1e-9 (spline_profile).  d'(s) = dd/ds with s in [0,1] (so |R_s| = |b-a| ~ L).
 * Envelope of the two-parameter sphere family |x - R(t,s)| = d(s): differentiating in t
   and s gives, with x = R + d n and |n| = 1,
       n . R_t = 0,    n . R_s = -d'(s).
@@ -839,6 +840,27 @@ def _finite_array(value, shape_tail, what, where):
     return arr
 
 
+def spline_profile(tool, s, d):
+    """A spline cutter's d(s) from its coefficients (DESIGN.md: a cubic B-spline of 10
+    coefficients on clamped uniform knots) when it reproduces the sampled radii d at s to
+    1e-9 of their size; else None (another kind, or coefficients that disagree)."""
+    c = tool.get("coefficients") if isinstance(tool, dict) else None
+    if tool.get("kind") != "spline" or not isinstance(c, list) or len(c) < 4:
+        return None
+    try:
+        c = np.asarray(c, dtype=float)
+    except (TypeError, ValueError):
+        return None
+    if c.ndim != 1 or not np.all(np.isfinite(c)):
+        return None
+    n = len(c)
+    knots = np.concatenate(([0.0] * 4, np.arange(1, n - 3) / (n - 3), [1.0] * 4))
+    spline = BSpline(knots, c, 3)
+    if np.max(np.abs(spline(s) - d)) <= 1e-9 * max(1.0, float(np.max(np.abs(d)))):
+        return spline
+    return None
+
+
 class Patch:
     """One patch rebuilt from its JSON: the motion a(t), b(t) and the radii d(s)."""
 
@@ -878,6 +900,13 @@ class Patch:
         self.B = BSpline(self.knots, self.cb, 3)
         self.dA, self.dB = self.A.derivative(), self.B.derivative()
         self.radius = CubicSpline(self.s, self.d)  # not-a-knot: exact for cubics
+        # A spline cutter's d(s) is a cubic B-spline with knots inside (0, 1): the not-a-knot
+        # interpolation of its 101 samples is off near those knots by up to half a percent of
+        # the tolerance in Ω's position. Its coefficients give it exactly, when they agree
+        # with the samples (which stay the contract).
+        exact = spline_profile(tool, self.s, self.d)
+        if exact is not None:
+            self.radius = exact
         self.dradius = self.radius.derivative()
         err = p.get("error") or {}
         cov = p.get("coverage") or {}

@@ -288,6 +288,36 @@ class Geometry(unittest.TestCase):
         np.testing.assert_allclose(p.radius(s), d(s), atol=1e-12)
         np.testing.assert_allclose(p.dradius(s), dd(s), atol=1e-10)
 
+    def test_spline_cutter_profile_comes_from_its_coefficients(self):
+        # A spline cutter's d(s) is a cubic B-spline of 10 coefficients on clamped uniform
+        # knots (interior knots at k/7): between the 101 samples, near those knots, the
+        # not-a-knot interpolation of the samples is off; the coefficients are exact.
+        from scipy.interpolate import BSpline, CubicSpline
+        c = np.array([3.0, 3.4, 2.6, 3.9, 2.8, 3.6, 3.1, 4.0, 3.2, 3.5])
+        knots = np.concatenate(([0.0] * 4, np.arange(1, 7) / 7.0, [1.0] * 4))
+        d = BSpline(knots, c, 3)
+        kn = clamped_knots(4)
+        ca = linear_controls([0, 0, 0], [0, 5, 0], kn)
+        pj = patch_json(0, ca, ca + [0, 0, 10], kn, d, kind="spline")
+        pj["tool"]["coefficients"] = c.tolist()
+        s = np.linspace(0, 1, 997)
+        interpolated = CubicSpline(np.arange(101) / 100.0, d(np.arange(101) / 100.0))
+        self.assertGreater(np.max(np.abs(interpolated(s) - d(s))), 1e-6)  # what was rebuilt
+        p = cp.Patch(pj, 0, "x")
+        np.testing.assert_allclose(p.radius(s), d(s), atol=1e-12)
+        np.testing.assert_allclose(p.dradius(s), d.derivative()(s), atol=1e-9)
+        # Coefficients that disagree with the samples (the contract) are not used.
+        pj["tool"]["coefficients"] = (c + 0.01).tolist()
+        p = cp.Patch(pj, 0, "x")
+        np.testing.assert_allclose(p.radius(s), interpolated(s), atol=1e-12)
+        # Nor are they for another kind, or when they are not numbers.
+        pj["tool"]["coefficients"] = c.tolist()
+        pj["tool"]["kind"] = "barrel"
+        np.testing.assert_allclose(cp.Patch(pj, 0, "x").radius(s), interpolated(s), atol=1e-12)
+        pj["tool"]["kind"] = "spline"
+        pj["tool"]["coefficients"] = ["a"] * 10
+        np.testing.assert_allclose(cp.Patch(pj, 0, "x").radius(s), interpolated(s), atol=1e-12)
+
     def test_envelope_conditions_hold_for_a_general_motion(self):
         # Curved motion with a non-uniform knot vector and a spline-like radius: at each
         # envelope point f(t,s) = |P - R(t,s)| - d(s) vanishes with zero gradient

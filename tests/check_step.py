@@ -138,21 +138,6 @@ def evaluate(surface, u, v):
     return np.einsum("ia,abc,jb->ijc", Bu, poles, Bv)
 
 
-def exact_profile(patch, tool):
-    """A spline cutter's d(s) from its coefficients (DESIGN.md: a cubic B-spline of 10
-    coefficients on clamped uniform knots), when that reproduces the 101 sampled radii: the
-    rebuild's interpolation of the samples is off by up to half a percent of the tolerance
-    near the profile's knots, as much as the faces' own deviation. Else the samples stay."""
-    c = np.asarray(tool.get("coefficients") or [], dtype=float)
-    if tool.get("kind") != "spline" or len(c) < 4:
-        return
-    n = len(c)
-    knots = np.concatenate(([0.0] * 4, np.arange(1, n - 3) / (n - 3), [1.0] * 4))
-    d = BSpline(knots, c, 3)
-    if np.max(np.abs(d(patch.s) - patch.d)) <= 1e-9 * max(1.0, np.max(np.abs(patch.d))):
-        patch.radius, patch.dradius = d, d.derivative()
-
-
 def check(patches_json, step_path=None, rows=401, cols=81):
     """Per patch id: the largest distance (mm) of its face from Ω at rows × cols parameters."""
     data, patches, tol = check_patches.load_patches(patches_json)
@@ -165,7 +150,6 @@ def check(patches_json, step_path=None, rows=401, cols=81):
         if name not in faces:
             result[p.id] = None
             continue
-        exact_profile(p, pj.get("tool") or {})
         t0, t1 = nurbs.get("t_range", [0.0, 1.0])
         s0, s1 = nurbs.get("s_range", [0.0, 1.0])
         # Off the fit's own samples: offsets of a third of a step from the domain's ends.
