@@ -193,9 +193,11 @@ std::optional<std::vector<double>> direction_knots(const Points& fine, int rows,
 // many poles as points has a condition number that grows about 1.17 times a point (66 at 24
 // points, 1e13 at 200, exactly singular in double at 324, which a Rotor 67 patch hit); beyond,
 // four fifths as many poles as points, whose condition stays under 9 for every count up to 420
-// tried (half: under 5).
-PoleGrid fit_poles(const std::string& name, const Points& fine, int rows, int cols, double target,
-                   const FaceDomain& domain, const FaceBreaks& breaks) {
+// tried (half: under 5). `following` and `uniform` choose which of the two are tried; the result
+// is nothing when none was (the knots that follow Ω could not be laid).
+std::optional<PoleGrid> fit_poles(const std::string& name, const Points& fine, int rows, int cols, double target,
+                                  const FaceDomain& domain, const FaceBreaks& breaks, bool following = true,
+                                  bool uniform = true) {
   const int fine_cols = 2 * cols - 1;
   Points grid(static_cast<Eigen::Index>(rows) * cols, 3);
   for (int i = 0; i < rows; ++i)
@@ -207,11 +209,14 @@ PoleGrid fit_poles(const std::string& name, const Points& fine, int rows, int co
     if (!best || g.deviation < best->deviation) best = std::move(g);
     return best->deviation <= target;
   };
-  const std::optional<std::vector<double>> ku =
-      direction_knots(fine, rows, cols, false, breaks.t, domain.t0, domain.t1, 0.5 * target);
-  const std::optional<std::vector<double>> kv =
-      ku ? direction_knots(fine, rows, cols, true, breaks.s, domain.s0, domain.s1, 0.5 * target) : std::nullopt;
-  if (ku && kv && consider(least_squares(name, grid, rows, cols, *ku, *kv))) return *best;
+  if (following) {
+    const std::optional<std::vector<double>> ku =
+        direction_knots(fine, rows, cols, false, breaks.t, domain.t0, domain.t1, 0.5 * target);
+    const std::optional<std::vector<double>> kv =
+        ku ? direction_knots(fine, rows, cols, true, breaks.s, domain.s0, domain.s1, 0.5 * target) : std::nullopt;
+    if (ku && kv && consider(least_squares(name, grid, rows, cols, *ku, *kv))) return best;
+  }
+  if (!uniform) return best;
   const auto poles = [](int points, bool more) {
     const int half = std::max(4, (points + 1) / 2);
     return more ? std::min(points, std::max({half, 24, static_cast<int>(std::ceil(0.8 * points))})) : half;
@@ -220,7 +225,7 @@ PoleGrid fit_poles(const std::string& name, const Points& fine, int rows, int co
     if (consider(least_squares(name, grid, rows, cols, knots_over(poles(rows, more), domain.t0, domain.t1),
                                knots_over(poles(cols, more), domain.s0, domain.s1))))
       break;
-  return *best;
+  return best;
 }
 
 FittedSurface to_surface(const std::string& name, const PoleGrid& g) {
@@ -239,7 +244,7 @@ FaceBreaks face_breaks(const Patch& p) {
 
 FittedSurface fit_exact_grid(const std::string& name, const Points& fine, int rows, int cols, double target,
                              const FaceDomain& domain, const FaceBreaks& breaks) {
-  return to_surface(name, fit_poles(name, fine, rows, cols, target, domain, breaks));
+  return to_surface(name, *fit_poles(name, fine, rows, cols, target, domain, breaks));
 }
 
 bool exact_omega_grid(const Patch& p, int& rows, int& cols, Points& fine, FaceDomain* domain, int margin) {
@@ -371,27 +376,37 @@ std::vector<WrittenFace> write_patches_step(const std::filesystem::path& path, c
       // Ω's grid in the evaluation's (t, s) samples, then up to eight times as many rows and
       // columns (more points to hold more knots, where the face needs more poles than four
       // fifths of the grid's points), until the face is within 1/150 of the tolerance (a
-      // margin under the 1% promised); else the closest. Where Ω ends inside the grid, a face that misses the target is first tried
-      // again at the same density kept 1, 2, 4, 8 envelope rows (columns) farther from that
-      // end: the kink where Ω ends is what a denser grid then fits slowly (the noisy barrel's
-      // second patch went to 3001 × 1257 points, 1/75 of the tolerance, where one row off
-      // its end met the target at 376 × 158; 28 of its command's 35 s).
+      // margin under the 1% promised); else the closest. Where Ω ends inside the grid, a face
+      // that misses the target is first tried again at the same density kept 1, 2, 4, 8
+      // envelope rows (columns) farther from that end: the kink where Ω ends is what a denser
+      // grid then fits slowly (the noisy barrel's second patch went to 3001 × 1257 points,
+      // 1/75 of the tolerance, where one row off its end met the target at 376 × 158; 28 of
+      // its command's 35 s).
+      // Knots that follow Ω are tried on grids up to twice as dense before uniform knots on
+      // any: where Ω turns faster than the grid's rows near an end (HECC side a at 1e-4,
+      // patch 1), a span cannot be split finer than the rows, and uniform knots met the target
+      // there with 160 × 87 poles.
       bool met = false;
-      for (const auto& [more_rows, more_cols] : {std::pair{1, 1}, {2, 1}, {2, 2}, {4, 2}, {4, 4}, {8, 4}, {8, 8}}) {
+      const auto attempt = [&](int more_rows, int more_cols, bool following, bool uniform) {
         for (const int margin : {0, 1, 2, 4, 8}) {
           int rows = (p.envelope.rows - 1) * more_rows + 1, cols = (p.envelope.cols - 1) * more_cols + 1;
           Points fine;
           FaceDomain domain;
           if (!exact_omega_grid(p, rows, cols, fine, &domain, margin)) break;
           const bool trimmed = domain.t0 > 0.0 || domain.t1 < 1.0 || domain.s0 > 0.0 || domain.s1 < 1.0;
-          PoleGrid g =
-              fit_poles(file + ": patch " + std::to_string(p.id), fine, rows, cols, tolerance / 150.0, domain, breaks);
-          if (!out.best || g.deviation < out.best->deviation) out.best = std::move(g), out.domain = domain;
-          met = out.best->deviation <= tolerance / 150.0;
+          std::optional<PoleGrid> g = fit_poles(file + ": patch " + std::to_string(p.id), fine, rows, cols,
+                                                tolerance / 150.0, domain, breaks, following, uniform);
+          if (g && (!out.best || g->deviation < out.best->deviation)) out.best = std::move(*g), out.domain = domain;
+          met = out.best && out.best->deviation <= tolerance / 150.0;
           if (met || !trimmed) break;
         }
-        if (met) break;
-      }
+        return met;
+      };
+      constexpr std::pair<int, int> kDensities[] = {{1, 1}, {2, 1}, {2, 2}, {4, 2}, {4, 4}, {8, 4}, {8, 8}};
+      constexpr int kFollowingFirst = 3;  // the densities where knots that follow Ω go first
+      for (int d = 0; d < kFollowingFirst && !met; ++d) attempt(kDensities[d].first, kDensities[d].second, true, false);
+      for (int d = 0; d < 7 && !met; ++d)
+        attempt(kDensities[d].first, kDensities[d].second, d >= kFollowingFirst, true);
     } catch (...) {
       out.error = std::current_exception();
     }

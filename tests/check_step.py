@@ -164,6 +164,18 @@ def check(patches_json, step_path=None, rows=401, cols=81):
     return result, tol
 
 
+def pole_counts(patches_json, step_path=None):
+    """Per patch id: the poles (nu × nv) of its face in patches.step, or None without one."""
+    data = check_patches.load_patches(patches_json)[0]
+    step_path = step_path or os.path.join(os.path.dirname(patches_json), "patches.step")
+    faces = named_surfaces(step_path)
+    counts = {}
+    for index, pj in enumerate(data["patches"]):
+        name = (pj.get("nurbs") or {}).get("face") or f"P{pj.get('id', index)}"
+        counts[pj.get("id", index)] = faces[name][4].shape[0] * faces[name][4].shape[1] if name in faces else None
+    return counts
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("patches_json")
@@ -177,11 +189,13 @@ def main(argv=None):
     except (check_patches.InputError, OSError, ValueError) as exc:
         print(f"check_step: {exc}", file=sys.stderr)
         return 2
+    poles = pole_counts(a.patches_json, a.step)
     bad = 0
     for pid, dev in result.items():
         ok = dev is not None and dev <= a.limit * tol
         bad += not ok
-        print(f"P{pid}: " + ("no face" if dev is None else f"{dev:.3g} mm = {dev / tol:.4f} tol")
+        print(f"P{pid}: " + ("no face" if dev is None else f"{dev:.3g} mm = {dev / tol:.4f} tol, "
+                             f"{poles.get(pid)} poles")
               + ("" if ok else "  FAILS"))
     worst = max((d for d in result.values() if d is not None), default=0.0)
     print(f"{len(result)} faces, worst {worst / tol:.4f} tol (limit {a.limit})")
