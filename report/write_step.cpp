@@ -194,10 +194,12 @@ std::optional<std::vector<double>> direction_knots(const Points& fine, int rows,
 // points, 1e13 at 200, exactly singular in double at 324, which a Rotor 67 patch hit); beyond,
 // four fifths as many poles as points, whose condition stays under 9 for every count up to 420
 // tried (half: under 5). `following` and `uniform` choose which of the two are tried; the result
-// is nothing when none was (the knots that follow Ω could not be laid).
+// is nothing when none was. `unlaid` (if given) receives the direction along which the knots
+// that follow Ω could not be laid (1: t, 2: s), else 0.
 std::optional<PoleGrid> fit_poles(const std::string& name, const Points& fine, int rows, int cols, double target,
                                   const FaceDomain& domain, const FaceBreaks& breaks, bool following = true,
-                                  bool uniform = true) {
+                                  bool uniform = true, int* unlaid = nullptr) {
+  if (unlaid) *unlaid = 0;
   const int fine_cols = 2 * cols - 1;
   Points grid(static_cast<Eigen::Index>(rows) * cols, 3);
   for (int i = 0; i < rows; ++i)
@@ -215,6 +217,7 @@ std::optional<PoleGrid> fit_poles(const std::string& name, const Points& fine, i
     const std::optional<std::vector<double>> kv =
         ku ? direction_knots(fine, rows, cols, true, breaks.s, domain.s0, domain.s1, 0.5 * target) : std::nullopt;
     if (ku && kv && consider(least_squares(name, grid, rows, cols, *ku, *kv))) return best;
+    if (unlaid && !(ku && kv)) *unlaid = ku ? 2 : 1;
   }
   if (!uniform) return best;
   const auto poles = [](int points, bool more) {
@@ -382,12 +385,14 @@ std::vector<WrittenFace> write_patches_step(const std::filesystem::path& path, c
       // grid then fits slowly (the noisy barrel's second patch went to 3001 × 1257 points,
       // 1/75 of the tolerance, where one row off its end met the target at 376 × 158; 28 of
       // its command's 35 s).
-      // Knots that follow Ω are tried on grids up to twice as dense before uniform knots on
-      // any: where Ω turns faster than the grid's rows near an end (HECC side a at 1e-4,
-      // patch 1), a span cannot be split finer than the rows, and uniform knots met the target
-      // there with 160 × 87 poles.
+      // Knots that follow Ω are tried first on grids denser along the direction where they
+      // could not be laid (up to 8×), before uniform knots on any: where Ω turns faster than
+      // the grid's rows near an end (HECC side a at 1e-4, patch 1; a made-up blade's face whose
+      // first span missed by 18× the target on the grid and 2× on twice the rows), a span
+      // cannot be split finer than the rows, and uniform knots met the target there with up to
+      // 320 × 144 poles.
       bool met = false;
-      const auto attempt = [&](int more_rows, int more_cols, bool following, bool uniform) {
+      const auto attempt = [&](int more_rows, int more_cols, bool following, bool uniform, int* unlaid) {
         for (const int margin : {0, 1, 2, 4, 8}) {
           int rows = (p.envelope.rows - 1) * more_rows + 1, cols = (p.envelope.cols - 1) * more_cols + 1;
           Points fine;
@@ -395,18 +400,28 @@ std::vector<WrittenFace> write_patches_step(const std::filesystem::path& path, c
           if (!exact_omega_grid(p, rows, cols, fine, &domain, margin)) break;
           const bool trimmed = domain.t0 > 0.0 || domain.t1 < 1.0 || domain.s0 > 0.0 || domain.s1 < 1.0;
           std::optional<PoleGrid> g = fit_poles(file + ": patch " + std::to_string(p.id), fine, rows, cols,
-                                                tolerance / 150.0, domain, breaks, following, uniform);
+                                                tolerance / 150.0, domain, breaks, following, uniform,
+                                                margin == 0 ? unlaid : nullptr);
           if (g && (!out.best || g->deviation < out.best->deviation)) out.best = std::move(*g), out.domain = domain;
           met = out.best && out.best->deviation <= tolerance / 150.0;
           if (met || !trimmed) break;
         }
         return met;
       };
-      constexpr std::pair<int, int> kDensities[] = {{1, 1}, {2, 1}, {2, 2}, {4, 2}, {4, 4}, {8, 4}, {8, 8}};
-      constexpr int kFollowingFirst = 3;  // the densities where knots that follow Ω go first
-      for (int d = 0; d < kFollowingFirst && !met; ++d) attempt(kDensities[d].first, kDensities[d].second, true, false);
-      for (int d = 0; d < 7 && !met; ++d)
-        attempt(kDensities[d].first, kDensities[d].second, d >= kFollowingFirst, true);
+      std::vector<std::pair<int, int>> followed;  // densities where the first pass tried them
+      for (int more_rows = 1, more_cols = 1; more_rows <= 8 && more_cols <= 8;) {
+        int unlaid = 0;
+        followed.emplace_back(more_rows, more_cols);
+        if (attempt(more_rows, more_cols, true, false, &unlaid)) break;
+        if (unlaid == 1) more_rows *= 2;
+        else if (unlaid == 2) more_cols *= 2;
+        else break;  // laid, and the surface misses: the densities below take it on
+      }
+      for (const auto& [more_rows, more_cols] : {std::pair{1, 1}, {2, 1}, {2, 2}, {4, 2}, {4, 4}, {8, 4}, {8, 8}}) {
+        if (met) break;
+        const bool tried = std::find(followed.begin(), followed.end(), std::pair{more_rows, more_cols}) != followed.end();
+        attempt(more_rows, more_cols, !tried, true, nullptr);
+      }
     } catch (...) {
       out.error = std::current_exception();
     }
