@@ -11,6 +11,7 @@ that both see the same machine load, and the last columns give the change.
 Cases (all by default; name some to run only those):
   hecc_a/1e-4 hecc_b/1e-4 rotor_upper/1e-4 rotor_lower/1e-4   the NASA faces of tests/data
   hecc_a/3e-4 hecc_b/3e-4 rotor_upper/3e-4 rotor_lower/3e-4
+  freeform/1 ... freeform/6   made-up blade faces (tests/freeform_parts.py, seeds 1-6) at 1e-4
   cone13k      the 13.5k-vertex exact cone 4->7 envelope (flank synth --resolution 221x61)
   spline       the exact envelope of a free-form cutter (tests/decompose_acceptance.py)
   noisy_barrel a barrel envelope with noise and two holes, at 3e-4 (the same)
@@ -35,14 +36,21 @@ TESTS = os.path.join(HERE, "..", "tests")
 sys.path.insert(0, TESTS)
 import check_patches  # noqa: E402  (the independent checker)
 import decompose_acceptance  # noqa: E402  (its synthetic parts)
+import freeform_parts  # noqa: E402  (made-up blade faces)
 
 FACES = {"hecc_a": "hecc_splitter_blade_side_a", "hecc_b": "hecc_splitter_blade_side_b",
          "rotor_upper": "rotor67_blade_upper", "rotor_lower": "rotor67_blade_lower"}
-CASES = [f"{f}/{t}" for t in ("1e-4", "3e-4") for f in FACES] + ["cone13k", "spline", "noisy_barrel"]
+FREEFORM = [f"freeform/{seed}" for seed in range(1, 7)]
+CASES = [f"{f}/{t}" for t in ("1e-4", "3e-4") for f in FACES] + FREEFORM + ["cone13k", "spline", "noisy_barrel"]
 
 
 def part_of(case, flank, work):
     """(mesh path, relative tolerance) of a case; synthetic parts are made once in `work`."""
+    if case in FREEFORM:
+        path = os.path.join(work, case.replace("/", "_") + ".stl")
+        if not os.path.exists(path):
+            freeform_parts.write_stl(path, *freeform_parts.blade(int(case.split("/")[1])))
+        return path, 1e-4
     if "/" in case:
         face, tol = case.split("/")
         return os.path.join(TESTS, "data", FACES[face] + ".stl"), float(tol)

@@ -11,6 +11,8 @@ Cases:
                            most KMAX patches is at least MIN
   spline                   the exact envelope of a free-form (spline) cutter, made by
                            `flank synth`: one patch covering at least 95%
+  freeform SEED TOL KMAX MIN  a made-up blade face (tests/freeform_parts.py, SEED) at
+                           --tolerance-rel TOL, judged as a real face
   noisy_barrel             a barrel envelope with Gaussian noise (sigma = 2e-4 of the
                            diagonal on every coordinate of every vertex) and two holes (radius
                            5% of the diagonal), at --tolerance-rel 3e-4: the first 2 patches
@@ -40,6 +42,7 @@ HERE = os.path.dirname(os.path.abspath(__file__))
 sys.path.insert(0, HERE)
 import check_patches  # noqa: E402  (the independent checker, beside this file)
 import check_step  # noqa: E402  (patches.step's faces against the same rebuild)
+import freeform_parts  # noqa: E402  (made-up blade faces)
 
 DATA = os.path.join(HERE, "data")
 
@@ -144,7 +147,7 @@ def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--flank", required=True)
     ap.add_argument("--work", help="keep the outputs here (default: a temporary folder)")
-    ap.add_argument("case", choices=["real", "spline", "noisy_barrel", "cad"])
+    ap.add_argument("case", choices=["real", "freeform", "spline", "noisy_barrel", "cad"])
     ap.add_argument("args", nargs="*")
     a = ap.parse_args(argv)
     with tempfile.TemporaryDirectory() as tmp:
@@ -157,6 +160,16 @@ def main(argv=None):
             face, tol, kmax, min_cov = a.args[0], float(a.args[1]), int(a.args[2]), float(a.args[3])
             mesh = os.path.join(DATA, face + ".stl")
             name = f"{face} at {tol:g}"
+            data = decompose(a.flank, mesh, out, tol)
+            res = check_patches.check(os.path.join(out, "patches.json"), mesh)
+            fails, summary = judge(data, res, out, kmax, min_cov)
+        elif a.case == "freeform":
+            if len(a.args) != 4:
+                ap.error("freeform takes SEED TOL KMAX MIN")
+            seed, tol, kmax, min_cov = int(a.args[0]), float(a.args[1]), int(a.args[2]), float(a.args[3])
+            mesh = os.path.join(work, f"freeform_{seed}.stl")
+            freeform_parts.write_stl(mesh, *freeform_parts.blade(seed))
+            name = f"made-up blade face {seed} at {tol:g}"
             data = decompose(a.flank, mesh, out, tol)
             res = check_patches.check(os.path.join(out, "patches.json"), mesh)
             fails, summary = judge(data, res, out, kmax, min_cov)
