@@ -21,7 +21,8 @@ Definitions (the contract; derived here from first principles, not from the C++)
   *not-a-knot* end condition, because it reproduces polynomials up to degree 3 exactly
   (cylinder, cone, barrel cutters are exact; a natural spline would bend the ends of a
   barrel's parabola). A spline cutter's d(s) is its coefficients' cubic B-spline on clamped
-  uniform knots instead, when that reproduces the samples to 1e-9 (spline_profile).  d'(s) = dd/ds with s in [0,1] (so |R_s| = |b-a| ~ L).
+  uniform knots instead, when that reproduces the samples to 1e-9 (spline_profile).
+  d'(s) = dd/ds with s in [0,1] (so |R_s| = |b-a| ~ L).
 * Envelope of the two-parameter sphere family |x - R(t,s)| = d(s): differentiating in t
   and s gives, with x = R + d n and |n| = 1,
       n . R_t = 0,    n . R_s = -d'(s).
@@ -844,8 +845,10 @@ def spline_profile(tool, s, d):
     """A spline cutter's d(s) from its coefficients (DESIGN.md: a cubic B-spline of 10
     coefficients on clamped uniform knots) when it reproduces the sampled radii d at s to
     1e-9 of their size; else None (another kind, or coefficients that disagree)."""
-    c = tool.get("coefficients") if isinstance(tool, dict) else None
-    if tool.get("kind") != "spline" or not isinstance(c, list) or len(c) < 4:
+    if not isinstance(tool, dict) or tool.get("kind") != "spline":
+        return None
+    c = tool.get("coefficients")
+    if not isinstance(c, list) or len(c) < 4:
         return None
     try:
         c = np.asarray(c, dtype=float)
