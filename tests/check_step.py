@@ -138,11 +138,16 @@ def evaluate(surface, u, v):
     return np.einsum("ia,abc,jb->ijc", Bu, poles, Bv)
 
 
-def check(patches_json, step_path=None, rows=401, cols=81):
-    """Per patch id: the largest distance (mm) of its face from Ω at rows × cols parameters."""
+def faces_of(patches_json, step_path=None):
+    """The named surfaces of patches.step (beside PATCHES_JSON unless STEP_PATH is given)."""
+    return named_surfaces(step_path or os.path.join(os.path.dirname(patches_json), "patches.step"))
+
+
+def check(patches_json, step_path=None, rows=401, cols=81, faces=None):
+    """Per patch id: the largest distance (mm) of its face from Ω at rows × cols parameters.
+    `faces`: faces_of(...) already read, else the file is read here."""
     data, patches, tol = check_patches.load_patches(patches_json)
-    step_path = step_path or os.path.join(os.path.dirname(patches_json), "patches.step")
-    faces = named_surfaces(step_path)
+    faces = faces if faces is not None else faces_of(patches_json, step_path)
     result = {}
     for p, pj in zip(patches, data["patches"]):
         nurbs = pj.get("nurbs") or {}
@@ -164,11 +169,11 @@ def check(patches_json, step_path=None, rows=401, cols=81):
     return result, tol
 
 
-def pole_counts(patches_json, step_path=None):
-    """Per patch id: the poles (nu × nv) of its face in patches.step, or None without one."""
+def pole_counts(patches_json, step_path=None, faces=None):
+    """Per patch id: the poles (nu × nv) of its face in patches.step, or None without one.
+    `faces` as for check."""
     data = check_patches.load_patches(patches_json)[0]
-    step_path = step_path or os.path.join(os.path.dirname(patches_json), "patches.step")
-    faces = named_surfaces(step_path)
+    faces = faces if faces is not None else faces_of(patches_json, step_path)
     counts = {}
     for index, pj in enumerate(data["patches"]):
         name = (pj.get("nurbs") or {}).get("face") or f"P{pj.get('id', index)}"
@@ -185,11 +190,13 @@ def main(argv=None):
     ap.add_argument("--cols", type=int, default=81)
     a = ap.parse_args(argv)
     try:
-        result, tol = check(a.patches_json, a.step, a.rows, a.cols)
+        check_patches.load_patches(a.patches_json)  # its errors first, as the file named
+        faces = faces_of(a.patches_json, a.step)
+        result, tol = check(a.patches_json, a.step, a.rows, a.cols, faces)
+        poles = pole_counts(a.patches_json, a.step, faces)
     except (check_patches.InputError, OSError, ValueError) as exc:
         print(f"check_step: {exc}", file=sys.stderr)
         return 2
-    poles = pole_counts(a.patches_json, a.step)
     bad = 0
     for pid, dev in result.items():
         ok = dev is not None and dev <= a.limit * tol

@@ -100,8 +100,9 @@ MAX_FACE_POLES = 4000
 def judge(data, res, out, kmax, min_cov, max_patches=None, clean=True):
     """The case's verdict: a list of failures (empty when it holds) and the summary."""
     fails = []
-    faces, _ = check_step.check(os.path.join(out, "patches.json"))
-    poles = check_step.pole_counts(os.path.join(out, "patches.json"))
+    step_faces = check_step.faces_of(os.path.join(out, "patches.json"))  # read once for both
+    faces, _ = check_step.check(os.path.join(out, "patches.json"), faces=step_faces)
+    poles = check_step.pole_counts(os.path.join(out, "patches.json"), faces=step_faces)
     tol = res["tolerance"]
     curve = res["coverage_curve"]
     n = len(curve)
