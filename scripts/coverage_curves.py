@@ -17,17 +17,20 @@ Cases (all by default; name some to run only those):
   noisy_barrel a barrel envelope with noise and two holes, at 3e-4 (the same)
 
 How much of a difference is noise: the search is chaotic (a small change picks other lines,
-then other patches), so `--tol-scale 1.001` reruns every case at a tolerance 0.1% larger;
-the spread that alone causes is the yardstick for a change's curves.
+then other patches), so `--tol-scale 1.001` reruns every case at a tolerance 0.1% larger.
+`--spread` runs A twice more per case, at tolerances 1% smaller and 1% larger. The range of
+A's three final coverages is the yardstick. With B, each case says whether B's final
+coverage is below, within or above that range, and a last line counts the cases below. A
+change of the search moves single cases by a few points either way, as a 1% change of the
+tolerance does. A change is judged by how many cases fall below A's spread, and how far.
 
-Usage: scripts/coverage_curves.py --flank BIN [--flank-b BIN] [--tol-scale F] [-o DIR] [CASE ...]
+Usage: scripts/coverage_curves.py --flank BIN [--flank-b BIN] [--tol-scale F] [--spread] [-o DIR] [CASE ...]
 Writes DIR/curves.json (every figure) and DIR/curves.md (the table) and prints the table.
 """
 
 import argparse
 import json
 import os
-import subprocess
 import sys
 import time
 
@@ -79,11 +82,27 @@ def run_case(flank, mesh, tol, out):
             "kinds": [p["tool"]["kind"] for p in data["patches"]]}
 
 
+# The tolerances A also runs at with --spread, as factors of the case's tolerance.
+SPREAD = (0.99, 1.01)
+
+
+def judge(spread, coverage):
+    """Where `coverage` lies against the final coverages in `spread` (A's runs at the case's
+    tolerance and at SPREAD times it): ("below" | "within" | "above", lowest, highest)."""
+    if not spread:
+        raise ValueError("judge needs at least one coverage to compare with")
+    lo, hi = min(spread), max(spread)
+    verdict = "below" if coverage < lo else "above" if coverage > hi else "within"
+    return verdict, lo, hi
+
+
 def main(argv=None):
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--flank", required=True, help="the flank binary (A)")
     ap.add_argument("--flank-b", help="a second flank binary (B), run alternately with A")
     ap.add_argument("--tol-scale", type=float, default=1.0, help="multiply every case's tolerance")
+    ap.add_argument("--spread", action="store_true",
+                    help="also run A at tolerances 1%% smaller and larger, and judge B against that range")
     ap.add_argument("-o", "--out", default="coverage-curves", help="output folder")
     ap.add_argument("cases", nargs="*", help="cases to run (default: all)")
     a = ap.parse_args(argv)
@@ -105,19 +124,51 @@ def main(argv=None):
             r = results[c][tag]
             print(f"{c} {tag}: {r['patches']} patches, {100 * r['coverage']:.1f}%, {r['wall_s']:.2f} s",
                   file=sys.stderr)
+        if a.spread:
+            for f in SPREAD:
+                tag = f"A x{f:g}"
+                out = os.path.join(a.out, f"A_x{f:g}", c.replace("/", "_"))
+                results[c][tag] = run_case(a.flank, mesh, tol * f, out)
+                r = results[c][tag]
+                print(f"{c} {tag}: {r['patches']} patches, {100 * r['coverage']:.1f}%, {r['wall_s']:.2f} s",
+                      file=sys.stderr)
     lines = ["| case | run | time (s) | patches | coverage after 1, 2, ... patches (rebuilt, %) | worst max abs e / tol |",
              "| --- | --- | --- | --- | --- | --- |"]
     for c in cases:
-        for tag, flank in bins:
+        for tag in results[c]:
             r = results[c][tag]
             curve = " ".join(f"{100 * x:.1f}" for x in r["curve"])
             lines.append(f"| {c} | {tag} | {r['wall_s']:.2f} | {r['patches']} | {curve} | {r['worst_max_e_over_tol']:.3f} |")
+    if a.spread:
+        factors = (SPREAD[0], 1.0, SPREAD[1])
+        lines += ["", f"| case | A's final coverage at {', '.join(f'{f:g}' for f in factors)} x tol (%) | range (points) |",
+                  "| --- | --- | --- |"]
+        for c in cases:
+            covs = [results[c]["A" if f == 1.0 else f"A x{f:g}"]["coverage"] for f in factors]
+            lines.append(f"| {c} | {' / '.join(f'{100 * x:.1f}' for x in covs)} | {100 * (max(covs) - min(covs)):.1f} |")
     if a.flank_b:
-        lines += ["", "| case | time B / A | coverage B - A (points) | patches A -> B |", "| --- | --- | --- | --- |"]
+        head = "| case | time B / A | coverage B - A (points) | patches A -> B |"
+        rule = "| --- | --- | --- | --- |"
+        if a.spread:
+            head += f" A's range at {SPREAD[0]:g}-{SPREAD[1]:g} x tol (%) | B against it |"
+            rule += " --- | --- |"
+        lines += ["", head, rule]
+        below = []
         for c in cases:
             ra, rb = results[c]["A"], results[c]["B"]
-            lines.append(f"| {c} | {rb['wall_s'] / ra['wall_s']:.2f} | {100 * (rb['coverage'] - ra['coverage']):+.1f} "
-                         f"| {ra['patches']} -> {rb['patches']} |")
+            row = (f"| {c} | {rb['wall_s'] / ra['wall_s']:.2f} | {100 * (rb['coverage'] - ra['coverage']):+.1f} "
+                   f"| {ra['patches']} -> {rb['patches']} |")
+            if a.spread:
+                spread = [ra["coverage"]] + [results[c][f"A x{f:g}"]["coverage"] for f in SPREAD]
+                verdict, lo, hi = judge(spread, rb["coverage"])
+                results[c]["B"]["against_spread"] = verdict
+                if verdict == "below":
+                    below.append(f"{c} ({100 * (rb['coverage'] - lo):+.1f})")
+                row += f" {100 * lo:.1f}..{100 * hi:.1f} | {verdict} |"
+            lines.append(row)
+        if a.spread:
+            lines += ["", f"B below A's spread in {len(below)} of {len(cases)} cases"
+                      + (": " + ", ".join(below) + " (points below its lowest)" if below else "")]
     table = "\n".join(lines)
     with open(os.path.join(a.out, "curves.md"), "w") as f:
         f.write(f"A: {a.flank}\n" + (f"B: {a.flank_b}\n" if a.flank_b else "") + "\n" + table + "\n")
