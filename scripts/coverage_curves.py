@@ -115,23 +115,22 @@ def main(argv=None):
     os.makedirs(work, exist_ok=True)
     bins = [("A", a.flank)] + ([("B", a.flank_b)] if a.flank_b else [])
     results = {}
+
+    def record(case, tag, r):
+        results.setdefault(case, {})[tag] = r
+        print(f"{case} {tag}: {r['patches']} patches, {100 * r['coverage']:.1f}%, {r['wall_s']:.2f} s",
+              file=sys.stderr)
+
     for c in cases:
         mesh, tol = part_of(c, a.flank, work)
         tol *= a.tol_scale
         for tag, flank in bins:
             out = os.path.join(a.out, tag, c.replace("/", "_"))
-            results.setdefault(c, {})[tag] = run_case(flank, mesh, tol, out)
-            r = results[c][tag]
-            print(f"{c} {tag}: {r['patches']} patches, {100 * r['coverage']:.1f}%, {r['wall_s']:.2f} s",
-                  file=sys.stderr)
+            record(c, tag, run_case(flank, mesh, tol, out))
         if a.spread:
             for f in SPREAD:
-                tag = f"A x{f:g}"
                 out = os.path.join(a.out, f"A_x{f:g}", c.replace("/", "_"))
-                results[c][tag] = run_case(a.flank, mesh, tol * f, out)
-                r = results[c][tag]
-                print(f"{c} {tag}: {r['patches']} patches, {100 * r['coverage']:.1f}%, {r['wall_s']:.2f} s",
-                      file=sys.stderr)
+                record(c, f"A x{f:g}", run_case(a.flank, mesh, tol * f, out))
     lines = ["| case | run | time (s) | patches | coverage after 1, 2, ... patches (rebuilt, %) | worst max abs e / tol |",
              "| --- | --- | --- | --- | --- | --- |"]
     for c in cases:
