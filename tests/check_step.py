@@ -143,6 +143,11 @@ def faces_of(patches_json, step_path=None):
     return named_surfaces(step_path or os.path.join(os.path.dirname(patches_json), "patches.step"))
 
 
+def face_name(pj, pid):
+    """The name of patch `pid`'s face in patches.step: patches.json's nurbs.face, else P<id>."""
+    return (pj.get("nurbs") or {}).get("face") or f"P{pid}"
+
+
 def check(patches_json, step_path=None, rows=401, cols=81, faces=None):
     """Per patch id: the largest distance (mm) of its face from Ω at rows × cols parameters.
     `faces`: faces_of(...) already read, else the file is read here."""
@@ -151,7 +156,7 @@ def check(patches_json, step_path=None, rows=401, cols=81, faces=None):
     result = {}
     for p, pj in zip(patches, data["patches"]):
         nurbs = pj.get("nurbs") or {}
-        name = nurbs.get("face") or f"P{p.id}"
+        name = face_name(pj, p.id)
         if name not in faces:
             result[p.id] = None
             continue
@@ -176,8 +181,9 @@ def pole_counts(patches_json, step_path=None, faces=None):
     faces = faces if faces is not None else faces_of(patches_json, step_path)
     counts = {}
     for index, pj in enumerate(data["patches"]):
-        name = (pj.get("nurbs") or {}).get("face") or f"P{pj.get('id', index)}"
-        counts[pj.get("id", index)] = faces[name][4].shape[0] * faces[name][4].shape[1] if name in faces else None
+        pid = pj.get("id", index)
+        name = face_name(pj, pid)
+        counts[pid] = faces[name][4].shape[0] * faces[name][4].shape[1] if name in faces else None
     return counts
 
 
