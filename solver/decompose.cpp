@@ -315,7 +315,12 @@ DecomposeResult decompose(const SurfaceIndex& index, const DecomposeOptions& o, 
       std::vector<const Grown*> known(batch.size());
       for (std::size_t k = 0; k < batch.size(); ++k) known[k] = o.reuse_grown ? cache.find(*batch[k]) : nullptr;
       parallel_invoke_each(batch.size(), [&](std::size_t k) {
-        grown[k] = known[k] ? *known[k] : grow_patch(work, *batch[k], go);
+        if (known[k]) {
+          grown[k] = *known[k];
+          return;
+        }
+        grown[k] = grow_patch(work, *batch[k], go);
+        if (o.on_grown) o.on_grown(work, *batch[k], go, grown[k]);
       });
       for (std::size_t k = 0; k < batch.size(); ++k)
         if (o.reuse_grown && !known[k])

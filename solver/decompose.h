@@ -13,6 +13,7 @@
 #include "kernels/cutter.h"
 #include "kernels/surface_index.h"
 #include "solver/greedy_cover.h"
+#include "solver/grow_patch.h"
 #include "solver/patch.h"
 #include "solver/surface_noise.h"
 
@@ -85,6 +86,11 @@ struct DecomposeOptions {
 
   // Diagnostics: one line per candidate line kept, per grown piece and per round.
   std::function<void(const std::string&)> trace;
+  // Diagnostics: every candidate fitted (not one reused from an earlier round), with the index
+  // it was grown on (Φ's smoothed copy for a noisy scan), the options it was grown with and
+  // what it grew; called concurrently from the growth tasks. bench/grow_pairs grows the same
+  // candidates with other fit settings.
+  std::function<void(const SurfaceIndex&, const LineCandidate&, const GrowOptions&, const Grown&)> on_grown;
 
   std::string validate() const;
 };

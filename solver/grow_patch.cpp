@@ -1,6 +1,7 @@
 #include "solver/grow_patch.h"
 
 #include <algorithm>
+#include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <optional>
@@ -11,6 +12,7 @@ std::string GrowOptions::validate() const {
   if (std::string e = fit.validate(); !e.empty()) return e;
   if (std::string e = thresholds.validate(); !e.empty()) return e;
   if (trim_rounds < 0) return "trim rounds must not be negative";
+  if (refit_iterations < 0) return "refit iterations must not be negative";
   if (length_min < 0) return "the minimum length must not be negative";
   return {};
 }
@@ -40,6 +42,7 @@ FitPatchOptions trim_options(const GrowOptions& o, double length) {
   fo.tolerance = o.thresholds.tolerance;
   fo.max_rounds = o.trim_rounds;
   fo.refit_below = o.refit_below;
+  fo.refit_iterations = o.refit_iterations;
   fo.pieces = o.pieces;
   fo.untrusted_edges = o.given != nullptr;
   if (length > 0 && o.length_min > 0)
@@ -77,6 +80,7 @@ void trace_piece(const GrowOptions& o, const LineCandidate& c, int piece, const 
 }  // namespace
 
 Grown grow_patch(const SurfaceIndex& index, const LineCandidate& c, const GrowOptions& o) {
+  const auto start = std::chrono::steady_clock::now();
   Grown out;
   if (c.sweep.rulings.size() < 4) return out;
   const int K = o.fit.control_points > 0 ? o.fit.control_points : 16;
@@ -90,6 +94,7 @@ Grown grow_patch(const SurfaceIndex& index, const LineCandidate& c, const GrowOp
   for (const PieceStart& piece : first.other_pieces) {
     FitPatchOptions po = trim_options(o, piece.cutter.length);
     po.fit.kind = c.kind;
+    if (o.refit_iterations > 0) po.fit.max_iterations = o.refit_iterations;
     fits.push_back(fit_and_trim(index, piece.motion, po, &piece.cutter));
   }
 
@@ -106,6 +111,7 @@ Grown grow_patch(const SurfaceIndex& index, const LineCandidate& c, const GrowOp
   }
   std::stable_sort(out.patches.begin(), out.patches.end(),
                    [](const Patch& a, const Patch& b) { return a.covered_area > b.covered_area; });
+  out.seconds = std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
   return out;
 }
 

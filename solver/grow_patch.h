@@ -25,6 +25,9 @@ struct GrowOptions {
   FitOptions fit;               // kind, control points, samples, iterations, radius range
   int trim_rounds = 1;          // trim + refit rounds
   double refit_below = 0.8;     // a trim keeping more of the grid is cut without refit
+  // Iterations of a fit that starts from a fitted motion: after a trim, and of the first
+  // trim's other pieces (0: fit.max_iterations).
+  int refit_iterations = 0;
   PieceOptions pieces;
   double length_min = 0.0;      // a piece whose cutter is shorter is no real tool (absolute)
   EvaluateOptions evaluate;     // grid, holder; coverage is always measured
@@ -39,6 +42,7 @@ struct GrowOptions {
 struct Grown {
   std::vector<Patch> patches;  // valid pieces, best first
   int pieces = 0;              // pieces fitted, valid or not
+  double seconds = 0.0;        // wall time of the growth, on its thread
 };
 
 // On the calling thread's share of the pool (fits and evaluations use the parallel facade).

@@ -10,6 +10,7 @@ std::string FitPatchOptions::validate() const {
   if (std::string e = fit.validate(); !e.empty()) return e;
   if (!(tolerance > 0.0) || !std::isfinite(tolerance)) return "tolerance must be positive";
   if (max_rounds < 0) return "trim rounds must not be negative";
+  if (refit_iterations < 0) return "refit iterations must not be negative";
   if (pieces.min_rows < 2 || pieces.min_cols < 2) return "a piece needs at least 2 by 2 samples";
   return {};
 }
@@ -209,6 +210,7 @@ FitPatchResult fit_and_trim(const SurfaceIndex& index, const Motion& init,
       return out;
     }
     fo.length = next.cutter.length;
+    if (options.refit_iterations > 0) fo.max_iterations = options.refit_iterations;
     ++out.rounds;
     out.fit = fit_motion(index, next.motion, fo, &next.cutter);
   }

@@ -54,6 +54,9 @@ struct FitPatchOptions {
   // A trim that keeps at least this fraction of the grid is cut without a refit (1: always
   // refit): a refit of nearly the same range changes nearly nothing and costs a whole fit.
   double refit_below = 1.0;
+  // Iterations of a refit after a trim (0: fit.max_iterations). It starts from the fitted
+  // motion cut to the kept range, near its optimum already.
+  int refit_iterations = 0;
   PieceOptions pieces;
   // Also return the other pieces of the first trim (as restricted, not yet refitted starts).
   bool keep_pieces = false;

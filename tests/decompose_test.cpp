@@ -6,6 +6,7 @@
 #include <gtest/gtest.h>
 
 #include <cstdio>
+#include <mutex>
 
 #include "io/read_mesh.h"
 #include "kernels/parallel.h"
@@ -190,6 +191,33 @@ TEST(Decompose, OptionsValidate) {
   EXPECT_TRUE(o.validate().empty());
   o.radius_min = 5, o.radius_max = 1;
   EXPECT_NE(o.validate().find("--radius"), std::string::npos);
+}
+
+// The growth hook (bench/grow_pairs) sees every candidate fitted, once, with the index grown
+// on and what it grew.
+TEST(Decompose, OnGrownSeesEveryFittedCandidate) {
+  const SynthResult part = testing::paper_part(PaperTool::cone, 61, 21);
+  const SurfaceIndex index(part.mesh);
+  DecomposeOptions o = defaults(index, CutterKind::cone);
+  std::mutex mutex;
+  int calls = 0, patches = 0, elsewhere = 0, untimed = 0;
+  o.on_grown = [&](const SurfaceIndex& work, const LineCandidate& c, const GrowOptions& go, const Grown& g) {
+    const std::lock_guard<std::mutex> lock(mutex);
+    ++calls;
+    patches += static_cast<int>(g.patches.size());
+    elsewhere += &work != &index || c.kind != CutterKind::cone || go.fit.max_iterations != o.iterations;
+    untimed += !(g.seconds > 0.0);
+  };
+  const DecomposeResult r = decompose(index, o);
+  report("cone 61x21 with the growth hook", r, index.diagonal());
+  EXPECT_GT(r.grown, 0);
+  EXPECT_EQ(calls, r.grown);
+  EXPECT_EQ(elsewhere, 0);
+  EXPECT_EQ(untimed, 0);
+  EXPECT_LE(patches, r.candidates_valid);
+  if (r.regrown == 0) {
+    EXPECT_EQ(patches, r.candidates_valid);
+  }
 }
 
 }  // namespace

@@ -134,6 +134,38 @@ TEST(GrowPatch, TooShortASweepGrowsNothing) {
   EXPECT_EQ(g.pieces, 0);
 }
 
+// A cylinder cannot follow the cone part (4 → 7 mm): the fit is out of tolerance toward the
+// cutter's ends, cut to its middle and refitted from there, within refit_iterations.
+TEST(FitAndTrim, ARefitAfterATrimRunsAtMostRefitIterations) {
+  const SynthResult part = testing::paper_part(PaperTool::cone, 61, 21);
+  const SurfaceIndex index(part.mesh);
+  const double diag = index.diagonal();
+  const GrowOptions go = decompose_like(diag, CutterKind::cylinder);
+  const LineCandidate c = true_axis_candidate(index, CutterKind::cylinder, go.thresholds);
+  const Motion init = Motion::fit(c.sweep.rulings, go.fit.control_points);
+  FitPatchOptions fo;
+  fo.fit = go.fit;
+  fo.fit.kind = CutterKind::cylinder;
+  fo.tolerance = go.thresholds.tolerance;
+  fo.max_rounds = 2;
+  for (const int refit : {0, 3}) {
+    fo.refit_iterations = refit;
+    ASSERT_TRUE(fo.validate().empty()) << fo.validate();
+    const FitPatchResult r = fit_and_trim(index, init, fo);
+    ASSERT_EQ(r.status, FitPatchStatus::ok) << r.message;
+    ASSERT_GE(r.rounds, 1) << "the cylinder was never trimmed";
+    std::printf("[ refit ] refit_iterations %d: %d trims, the last fit %d iterations, %s\n", refit, r.rounds,
+                r.fit.iterations, to_string(r.fit.status));
+    EXPECT_LE(r.fit.iterations, refit > 0 ? refit : fo.fit.max_iterations);
+    EXPECT_TRUE(r.fit.ok());
+  }
+  fo.refit_iterations = -1;
+  EXPECT_EQ(fo.validate(), "refit iterations must not be negative");
+  GrowOptions bad = go;
+  bad.refit_iterations = -1;
+  EXPECT_EQ(bad.validate(), "refit iterations must not be negative");
+}
+
 // ---------------------------------------------------------------------------------------------
 // reject_reason
 
