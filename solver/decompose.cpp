@@ -35,7 +35,7 @@ std::string DecomposeOptions::validate() const {
   if (grow_per_round < 1 || batch < 1) return "growth counts must be positive";
   if (control_points < 4) return "a motion needs at least 4 control points";
   if (samples_t < 8 || samples_s < 4) return "fit sample counts out of range";
-  if (iterations < 1) return "fit iterations must be positive";
+  if (iterations < 1 || refit_iterations < 1) return "fit iterations must be positive";
   if (final_rows < 2 || final_cols < 2 || !(final_spacing > 0 && final_spacing < 1))
     return "final evaluation settings out of range";
   return {};
@@ -208,6 +208,7 @@ DecomposeResult decompose(const SurfaceIndex& index, const DecomposeOptions& o, 
   go.fit.samples_t = o.samples_t;
   go.fit.samples_s = o.samples_s;
   go.fit.max_iterations = o.iterations;
+  go.refit_iterations = o.refit_iterations;
   go.fit.max_extrapolations = o.extrapolations;
   go.fit.radius_min = R.radius_min;
   go.fit.radius_max = R.radius_max;

@@ -141,10 +141,11 @@ TEST(Decompose, SameResultWhateverTheThreadCount) {
 
 // A later round that lays out a line an earlier round grew reuses its pieces, and one that
 // seeds where an earlier round did, with the same free runs, reuses that search's lines: on
-// this face both happen (regrown > 0, seeds_reused > 0), and the result is the one of fitting
-// and searching again, patch for patch.
+// this face both happen (regrown > 0, seeds_reused > 0; the face is chosen for that: with the
+// defaults of the time, side a until the refits took 5 iterations, side b since), and the
+// result is the one of fitting and searching again, patch for patch.
 TEST(DecomposeRealFace, ReusingEarlierGrowthOrSearchesChangesNothing) {
-  const Mesh mesh = io::read_mesh(FLANK_TEST_DATA_DIR "/hecc_splitter_blade_side_a.stl").mesh;
+  const Mesh mesh = io::read_mesh(FLANK_TEST_DATA_DIR "/hecc_splitter_blade_side_b.stl").mesh;
   const SurfaceIndex index(mesh);
   DecomposeOptions o;
   o.tolerance = 1e-4 * index.diagonal();
@@ -191,6 +192,9 @@ TEST(Decompose, OptionsValidate) {
   EXPECT_TRUE(o.validate().empty());
   o.radius_min = 5, o.radius_max = 1;
   EXPECT_NE(o.validate().find("--radius"), std::string::npos);
+  o.radius_min = o.radius_max = 0;
+  o.refit_iterations = 0;
+  EXPECT_EQ(o.validate(), "fit iterations must be positive");
 }
 
 // The growth hook (bench/grow_pairs) sees every candidate fitted, once, with the index grown
@@ -205,7 +209,8 @@ TEST(Decompose, OnGrownSeesEveryFittedCandidate) {
     const std::lock_guard<std::mutex> lock(mutex);
     ++calls;
     patches += static_cast<int>(g.patches.size());
-    elsewhere += &work != &index || c.kind != CutterKind::cone || go.fit.max_iterations != o.iterations;
+    elsewhere += &work != &index || c.kind != CutterKind::cone || go.fit.max_iterations != o.iterations ||
+                 go.refit_iterations != o.refit_iterations;
     untimed += !(g.seconds > 0.0);
   };
   const DecomposeResult r = decompose(index, o);

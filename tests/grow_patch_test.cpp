@@ -33,6 +33,7 @@ GrowOptions decompose_like(double diag, CutterKind general) {
   go.fit.samples_t = d.samples_t;
   go.fit.samples_s = d.samples_s;
   go.fit.max_iterations = d.iterations;
+  go.refit_iterations = d.refit_iterations;
   go.fit.max_extrapolations = d.extrapolations;
   go.fit.radius_min = DecomposeOptions::kDefaultRadiusMin * diag;
   go.fit.radius_max = DecomposeOptions::kDefaultRadiusMax * diag;
