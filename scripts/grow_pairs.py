@@ -4,12 +4,13 @@
 scripts/coverage_curves.py compares final coverage, which a small change to the fit moves by a
 few points either way: the search is chaotic. This runs build/bench/flank_grow_pairs on each
 case (the same parts as coverage_curves.py): decompose with its defaults (A) grows each
-candidate, and the same candidate is grown again with B's fit settings right after. It prints,
+candidate, and the tool grows the same candidate again with B's fit settings, and once more
+with A's for the time (in alternating order, on the same thread). It prints,
 per case and over all, the summed best covered area of B over A, the candidates valid with only
 one of them, and the growth time of B over A; and over all candidates the quantiles of B's
 best area over A's.
 
-Usage: scripts/grow_pairs.py [--pairs BIN] [--flank BIN] [-o DIR] [B OPTIONS ...] [-- CASE ...]
+Usage: scripts/grow_pairs.py [--pairs BIN] [--flank BIN] [-o DIR] [B OPTIONS ...] [CASE ...]
 B options are flank_grow_pairs's: --iterations N, --refit-iterations N, --samples TxS,
 --extrapolations N; or --same (B is A: equal areas, and the time ratio is the noise floor).
 Writes DIR/pairs.json (every pair of every case).

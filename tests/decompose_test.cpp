@@ -141,9 +141,9 @@ TEST(Decompose, SameResultWhateverTheThreadCount) {
 
 // A later round that lays out a line an earlier round grew reuses its pieces, and one that
 // seeds where an earlier round did, with the same free runs, reuses that search's lines: on
-// this face both happen (regrown > 0, seeds_reused > 0; the face is chosen for that: with the
-// defaults of the time, side a until the refits took 5 iterations, side b since), and the
-// result is the one of fitting and searching again, patch for patch.
+// this face both happen with the defaults (regrown > 0, seeds_reused > 0; the face is chosen
+// for that, and must be chosen again when the defaults change the search), and the result is
+// the one of fitting and searching again, patch for patch.
 TEST(DecomposeRealFace, ReusingEarlierGrowthOrSearchesChangesNothing) {
   const Mesh mesh = io::read_mesh(FLANK_TEST_DATA_DIR "/hecc_splitter_blade_side_b.stl").mesh;
   const SurfaceIndex index(mesh);
