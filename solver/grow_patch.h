@@ -59,7 +59,9 @@ struct FinishOptions {
 };
 
 // The patch with the simplest allowed cutter kind whose least-squares radii stay within
-// thresholds.simplify of the fitted ones everywhere and that, refitted, covers as much;
+// thresholds.simplify of the fitted ones everywhere and that, refitted from the patch's motion
+// (grow.refit_iterations Gauss–Newton iterations where set), covers at least 99% as much area
+// and 97% of the same (the fitted kind's covered vertices);
 // evaluated on the final grid. Empty when it is no valid patch there.
 std::optional<Patch> finish_patch(const SurfaceIndex& index, const Patch& patch,
                                   const FinishOptions& options);

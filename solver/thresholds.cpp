@@ -16,7 +16,7 @@ Thresholds thresholds_for(double tolerance) {
   t.sweep_misfit = 2.0 * tolerance;
   t.line_misfit = tolerance;
   t.kind_misfit = 0.25 * tolerance;
-  t.simplify = 0.1 * tolerance;
+  t.simplify = 16.0 * tolerance;
   t.gouge = tolerance;
   return t;
 }

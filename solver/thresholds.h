@@ -21,8 +21,13 @@ struct Thresholds {
   // distances within this (rms): a profile with fewer coefficients is pinned down by the fit
   // where a free-form one wanders along the radius ↔ offset valley.
   double kind_misfit = 0.0;
-  // A simpler cutter kind replaces the fitted one when its sphere radii stay within this of
-  // the fitted radii everywhere: Ω moves by at most as much.
+  // A simpler cutter kind is tried in place of a chosen patch's fitted one when its
+  // least-squares sphere radii stay within this of the fitted radii everywhere; refitted, it
+  // replaces it when it cuts the same surface (finish_patch). Not a bound on how far Ω moves:
+  // the refit moves the motion along the radius ↔ offset valley to absorb the difference (the
+  // exact cone part's barrels are 2–13τ from any cone). A bound on what the tries cost, each a
+  // fit: over the 17 coverage cases 146 tries within 16τ kept 16, 15 of them within 8τ
+  // (README, Performance, fifteenth part).
   double simplify = 0.0;
   // No sphere of the cutter, anywhere along it, may reach deeper into Φ than this.
   double gouge = 0.0;

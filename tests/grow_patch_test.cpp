@@ -373,6 +373,15 @@ TEST(FinishPatch, ConstantSplineOnTheCylinderPartBecomesTheCylinder) {
   expect_finished(index, *unchanged, fo);
 }
 
+// The spline through the true cone's sphere radii, along the true motion of the exact cone
+// part `index`.
+Patch spline_of_the_cone(const SurfaceIndex& index, const GrowOptions& go) {
+  const Cutter cone = cone_from_end_radii(kPaperToolLength, 4.0, 7.0);
+  std::vector<double> s(101), r(101);
+  for (int k = 0; k <= 100; ++k) s[k] = k / 100.0, r[k] = cone.radius(s[k]);
+  return evaluated(index, testing::true_motion(16), Cutter::fit(CutterKind::spline, kPaperToolLength, s, r), go);
+}
+
 // The spline through the true cone's sphere radii on the exact cone part: the cylinder's
 // least-squares radii are 1.5 mm off (far beyond thresholds.simplify), the cone's are exact,
 // so it comes back as the cone (the true one), not as the simplest kind allowed.
@@ -381,10 +390,7 @@ TEST(FinishPatch, SplineOfAConeBecomesTheConeNotTheCylinder) {
   const SurfaceIndex index(part.mesh);
   const double diag = index.diagonal();
   const GrowOptions go = decompose_like(diag, CutterKind::spline);
-  const Cutter cone = cone_from_end_radii(kPaperToolLength, 4.0, 7.0);
-  std::vector<double> s(101), r(101);
-  for (int k = 0; k <= 100; ++k) s[k] = k / 100.0, r[k] = cone.radius(s[k]);
-  const Patch spline = evaluated(index, testing::true_motion(16), Cutter::fit(CutterKind::spline, kPaperToolLength, s, r), go);
+  const Patch spline = spline_of_the_cone(index, go);
   ASSERT_EQ(reject_reason(spline, go), "");
   const FinishOptions fo = finish_like(go, diag, {CutterKind::cylinder, CutterKind::cone, CutterKind::barrel});
   const std::optional<Patch> simple = finish_patch(index, spline, fo);
@@ -395,6 +401,26 @@ TEST(FinishPatch, SplineOfAConeBecomesTheConeNotTheCylinder) {
   const double k = (ends(1) - ends(0)) / simple->cutter.length;
   EXPECT_NEAR(k, 3.0 / 50.0, 0.002);
   expect_finished(index, *simple, fo);
+}
+
+// A simpler kind must cut the same surface, not merely as much of it: the same spline patch,
+// told that half of what it covers lies elsewhere (every other covered vertex dropped, its
+// area kept), keeps its kind, though the cone refit covers as much area as before (on the
+// unchanged patch the cone is kept: the test above).
+TEST(FinishPatch, ASimplerKindMustCoverTheSameVertices) {
+  const SynthResult part = testing::paper_part(PaperTool::cone, kRows, kCols);
+  const SurfaceIndex index(part.mesh);
+  const double diag = index.diagonal();
+  const GrowOptions go = decompose_like(diag, CutterKind::spline);
+  Patch spline = spline_of_the_cone(index, go);
+  ASSERT_EQ(reject_reason(spline, go), "");
+  std::vector<int> half;
+  for (std::size_t k = 0; k < spline.covered_vertices.size(); k += 2) half.push_back(spline.covered_vertices[k]);
+  spline.covered_vertices = half;
+  const FinishOptions fo = finish_like(go, diag, {CutterKind::cylinder, CutterKind::cone, CutterKind::barrel});
+  const std::optional<Patch> finished = finish_patch(index, spline, fo);
+  ASSERT_TRUE(finished.has_value());
+  EXPECT_EQ(finished->cutter.kind, CutterKind::spline);
 }
 
 // A patch grown from the true axis of the exact cylinder part with the spline kind (as
