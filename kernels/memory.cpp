@@ -1,16 +1,23 @@
 #include "kernels/memory.h"
 
+// <cstdlib> first: it defines __GLIBC__ (through <features.h>) where the C library is glibc.
+// Tested before any C library header, the macro is never defined and the settings below are
+// compiled out: so they were from 85ae086 until the sixteenth part of issue 13 noticed that
+// mallopt was never called.
+#include <cstdlib>
+
 #if defined(__GLIBC__)
 #include <malloc.h>
 #endif
 
 namespace flank {
 
-void retain_freed_memory() {
+bool retain_freed_memory() {
 #if defined(__GLIBC__)
   // Setting either threshold also turns off glibc's own adjustment of both.
-  mallopt(M_MMAP_THRESHOLD, 256 << 20);
-  mallopt(M_TRIM_THRESHOLD, 1 << 30);
+  return mallopt(M_MMAP_THRESHOLD, 256 << 20) == 1 && mallopt(M_TRIM_THRESHOLD, 1 << 30) == 1;
+#else
+  return false;
 #endif
 }
 

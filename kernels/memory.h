@@ -8,8 +8,8 @@ namespace flank {
 // operating system. Every candidate patch builds an index over its Ω and drops it (tens of MB
 // for a large patch); by default glibc returns such blocks at once, and the next patch's index
 // then page-faults all of its memory afresh: a sixth of `decompose` on the 13.5k-vertex cone
-// part. Blocks up to 256 MiB come from the heap and up to 1 GiB of free heap is kept. A no-op
-// where the C library is not glibc.
-void retain_freed_memory();
+// part. Blocks up to 256 MiB come from the heap and up to 1 GiB of free heap is kept. True
+// where the settings took effect; a no-op returning false where the C library is not glibc.
+bool retain_freed_memory();
 
 }  // namespace flank
