@@ -1,10 +1,12 @@
 #include "solver/decompose.h"
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdio>
 #include <memory>
+#include <mutex>
 
 #include "kernels/parallel.h"
 #include "solver/candidate_lines.h"
@@ -315,18 +317,49 @@ DecomposeResult decompose(const SurfaceIndex& index, const DecomposeOptions& o, 
       std::vector<Grown> grown(batch.size());
       std::vector<const Grown*> known(batch.size());
       for (std::size_t k = 0; k < batch.size(); ++k) known[k] = o.reuse_grown ? cache.find(*batch[k]) : nullptr;
-      parallel_invoke_each(batch.size(), [&](std::size_t k) {
-        if (known[k]) {
-          grown[k] = *known[k];
-          return;
-        }
-        grown[k] = grow_patch(work, *batch[k], go);
-        if (o.on_grown) o.on_grown(work, *batch[k], go, grown[k]);
+      // The batch is grown in rank order, concurrently, and is kept up to the first candidate
+      // that grows a patch covering the target alone: a part one sweep covers grows one
+      // candidate instead of a batch. Which candidate that is follows from what each grows,
+      // never from which finished first, so the answer is the same at every thread count.
+      // Tasks take candidates in rank order and start none past that one once it is known;
+      // those already running finish and are dropped. Where no patch covers the target alone,
+      // the whole batch is grown: a cover of several patches picks among all of them (the
+      // first candidate with which the pool reached the target, as a stop, left freeform/6
+      // of scripts/coverage_curves.py with 95.4% in 4 patches instead of 98.8% in 5).
+      std::mutex kept_mutex;
+      std::atomic<std::size_t> next_task{0};
+      std::atomic<bool> enough{false};
+      std::vector<char> done(batch.size(), 0);
+      std::size_t kept = 0;  // grown[0, kept) are kept
+      bool reached = false;
+      const auto covers_alone = [&](const Grown& g) {
+        for (const Patch& p : g.patches)
+          if (p.covered_area >= o.coverage_target * cover.total_area) return true;
+        return false;
+      };
+      parallel_invoke_each(batch.size(), [&](std::size_t) {
+        const std::size_t k = next_task++;
+        if (enough) return;
+        if (known[k]) grown[k] = *known[k];
+        else grown[k] = grow_patch(work, *batch[k], go);
+        const std::lock_guard<std::mutex> lock(kept_mutex);
+        done[k] = 1;
+        while (!reached && kept < batch.size() && done[kept]) reached = covers_alone(grown[kept++]);
+        if (reached) enough = true;
       });
-      for (std::size_t k = 0; k < batch.size(); ++k)
+      // The cache after the batch: known[] points into it.
+      for (std::size_t k = 0; k < kept; ++k)
         if (o.reuse_grown && !known[k])
           cache.entries.push_back({batch[k]->line, batch[k]->kind, batch[k]->sweep.rulings, grown[k]});
-      for (std::size_t k = 0; k < batch.size(); ++k) {
+      if (o.on_grown) {
+        std::vector<std::size_t> fitted;
+        for (std::size_t k = 0; k < kept; ++k)
+          if (!known[k]) fitted.push_back(k);
+        parallel_invoke_each(fitted.size(), [&](std::size_t i) {
+          o.on_grown(work, *batch[fitted[i]], go, grown[fitted[i]]);
+        });
+      }
+      for (std::size_t k = 0; k < kept; ++k) {
         Grown& g = grown[k];
         ++(known[k] ? out.regrown : out.grown);
         ++grown_this_round;
@@ -338,6 +371,7 @@ DecomposeResult decompose(const SurfaceIndex& index, const DecomposeOptions& o, 
       }
       say("round " + std::to_string(round + 1) + ": grown " + std::to_string(grown_this_round) + ", " +
           std::to_string(out.candidates_valid) + " candidate patches so far");
+      if (reached) break;
       // Enough in the pool to reach the target: the rest need not be grown.
       Cover trial = cover;
       greedy_cover(pool, area, co, &trial);

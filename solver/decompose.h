@@ -54,7 +54,9 @@ struct DecomposeOptions {
   double probe_step = 0.015;  // of the diagonal: the probe sweeps' step
 
   // Growth: candidates grown per round, concurrently in batches of a fixed size (so that the
-  // result does not depend on the thread count). The fit's samples and control points.
+  // result does not depend on the thread count); a batch is kept up to the first candidate,
+  // in rank order, that grows a patch covering coverage_target alone. The fit's samples and
+  // control points.
   int grow_per_round = 16;
   int batch = 8;
   // A later round that lays out exactly a line an earlier one grew reuses that growth's pieces
@@ -91,10 +93,11 @@ struct DecomposeOptions {
 
   // Diagnostics: one line per candidate line kept, per grown piece and per round.
   std::function<void(const std::string&)> trace;
-  // Diagnostics: every candidate fitted (not one reused from an earlier round), with the index
-  // it was grown on (Φ's smoothed copy for a noisy scan), the options it was grown with and
-  // what it grew; called concurrently from the growth tasks. bench/grow_pairs grows the same
-  // candidates with other fit settings.
+  // Diagnostics: every candidate fitted and kept (not one reused from an earlier round, nor
+  // one dropped because a candidate ranked before it covered the coverage target alone),
+  // with the index it was grown on (Φ's smoothed copy for a noisy scan), the options it was
+  // grown with and what it grew; called concurrently after each batch. bench/grow_pairs
+  // grows the same candidates with other fit settings.
   std::function<void(const SurfaceIndex&, const LineCandidate&, const GrowOptions&, const Grown&)> on_grown;
 
   std::string validate() const;

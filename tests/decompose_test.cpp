@@ -147,6 +147,46 @@ TEST(Decompose, SameResultWhateverTheThreadCount) {
   }
 }
 
+// A batch of candidates is kept up to the first one, in rank order, that grows a patch
+// covering the coverage target alone, and no further: which one that is follows from what
+// each grows, not from which growth finished first. On one exact envelope the best-ranked
+// candidate covers the part alone, and it alone is kept, at one thread or two, as when
+// candidates are grown one at a time. Where no patch reaches the target alone, whole batches
+// are grown as before.
+TEST(Decompose, GrowthStopsAtTheFirstCandidateThatCoversTheTargetAlone) {
+  const SynthResult part = testing::paper_part(PaperTool::cone, 61, 21);
+  const SurfaceIndex index(part.mesh);
+  DecomposeOptions o = defaults(index, CutterKind::cone);
+  DecomposeResult r[2];
+  for (int threads : {1, 2}) {
+    ThreadLimit limit(threads);
+    r[threads - 1] = decompose(index, o);
+  }
+  DecomposeOptions one_by_one = o;
+  one_by_one.batch = 1;
+  const DecomposeResult single = decompose(index, one_by_one);
+  report("cone 61x21, growth stopped at the target", r[1], index.diagonal());
+  ASSERT_GE(o.batch, 2);
+  EXPECT_EQ(r[0].grown, 1);
+  EXPECT_EQ(r[1].grown, 1);
+  EXPECT_EQ(single.grown, 1);
+  EXPECT_GE(r[1].coverage, o.coverage_target);
+  for (const DecomposeResult* other : std::initializer_list<const DecomposeResult*>{&r[0], &single}) {
+    EXPECT_EQ(other->vertex_patch, r[1].vertex_patch);
+    ASSERT_EQ(other->patches.size(), r[1].patches.size());
+    for (std::size_t k = 0; k < r[1].patches.size(); ++k) {
+      EXPECT_EQ(other->patches[k].motion.a, r[1].patches[k].motion.a);
+      EXPECT_EQ(other->patches[k].cutter.coeffs, r[1].patches[k].cutter.coeffs);
+    }
+  }
+  DecomposeOptions unreachable = o;
+  unreachable.coverage_target = 1.0;
+  unreachable.max_rounds = 1;
+  const DecomposeResult all = decompose(index, unreachable);
+  ASSERT_LT(all.coverage, 1.0);  // no patch covers every vertex: none reaches the target alone
+  EXPECT_GE(all.grown + all.regrown, o.batch);
+}
+
 // A later round that lays out a line an earlier round grew reuses its pieces, and one that
 // seeds where an earlier round did, with the same free runs, reuses that search's lines: on
 // this face both happen with the defaults (regrown > 0, seeds_reused > 0; the face is chosen
