@@ -1,9 +1,8 @@
 #include "kernels/memory.h"
 
 // <cstdlib> first: it defines __GLIBC__ (through <features.h>) where the C library is glibc.
-// Tested before any C library header, the macro is never defined and the settings below are
-// compiled out: so they were from 85ae086 until the sixteenth part of issue 13 noticed that
-// mallopt was never called.
+// Tested before any C library header, the macro is undefined and the settings below vanish
+// (as they did from 85ae086 until the sixteenth part of issue 13).
 #include <cstdlib>
 
 #if defined(__GLIBC__)
