@@ -331,7 +331,6 @@ DecomposeResult decompose(const SurfaceIndex& index, const DecomposeOptions& o, 
       std::atomic<bool> enough{false};
       std::vector<char> done(batch.size(), 0);
       std::size_t kept = 0;  // grown[0, kept) are kept
-      bool reached = false;
       const auto covers_alone = [&](const Grown& g) {
         for (const Patch& p : g.patches)
           if (p.covered_area >= o.coverage_target * cover.total_area) return true;
@@ -344,8 +343,8 @@ DecomposeResult decompose(const SurfaceIndex& index, const DecomposeOptions& o, 
         else grown[k] = grow_patch(work, *batch[k], go);
         const std::lock_guard<std::mutex> lock(kept_mutex);
         done[k] = 1;
-        while (!reached && kept < batch.size() && done[kept]) reached = covers_alone(grown[kept++]);
-        if (reached) enough = true;
+        while (!enough && kept < batch.size() && done[kept])
+          if (covers_alone(grown[kept++])) enough = true;
       });
       // The cache after the batch: known[] points into it.
       for (std::size_t k = 0; k < kept; ++k)
@@ -371,7 +370,7 @@ DecomposeResult decompose(const SurfaceIndex& index, const DecomposeOptions& o, 
       }
       say("round " + std::to_string(round + 1) + ": grown " + std::to_string(grown_this_round) + ", " +
           std::to_string(out.candidates_valid) + " candidate patches so far");
-      if (reached) break;
+      if (enough) break;
       // Enough in the pool to reach the target: the rest need not be grown.
       Cover trial = cover;
       greedy_cover(pool, area, co, &trial);
