@@ -41,7 +41,9 @@ struct DecomposeOptions {
   int max_swaps = 8;        // improvements of the greedy cover per round (greedy_cover.h)
   int max_rounds = 6;       // seeding rounds: all of Φ, then what is still uncovered
   // A round after the first that adds less than this fraction of Φ's area ends the search:
-  // what is left is scattered slivers, cheaper to finish with a ball-end mill.
+  // what is left is scattered slivers, cheaper to finish with a ball-end mill. Within every
+  // round, a growth batch that adds less than this to the pool's greedy cover ends the
+  // round's growth.
   double min_round_gain = 0.01;
   // Seed spacing of the first round as a fraction of the diagonal; later rounds seed the
   // uncovered regions at half of it.

@@ -187,6 +187,28 @@ TEST(Decompose, GrowthStopsAtTheFirstCandidateThatCoversTheTargetAlone) {
   EXPECT_GE(all.grown + all.regrown, o.batch);
 }
 
+// A growth batch that adds less than min_round_gain to the pool's greedy cover ends the
+// round's growth. On the cone part the first batch grows the patch that covers it; with a
+// target no patch reaches, the second batch adds nothing and no third is grown, while with no
+// minimum gain growth goes on through the ranked candidates.
+TEST(Decompose, ABatchThatAddsTooLittleEndsTheRoundsGrowth) {
+  const SynthResult part = testing::paper_part(PaperTool::cone, 61, 21);
+  const SurfaceIndex index(part.mesh);
+  DecomposeOptions o = defaults(index, CutterKind::cone);
+  o.coverage_target = 1.0;
+  o.max_rounds = 1;
+  o.batch = 2;
+  o.grow_per_round = 16;
+  const DecomposeResult stopped = decompose(index, o);
+  o.min_round_gain = 0.0;
+  const DecomposeResult all = decompose(index, o);
+  report("cone 61x21, batches of 2, min_round_gain 0.01", stopped, index.diagonal());
+  report("cone 61x21, batches of 2, min_round_gain 0", all, index.diagonal());
+  ASSERT_LT(stopped.coverage, 1.0);
+  EXPECT_EQ(stopped.grown, 2 * o.batch);
+  EXPECT_GT(all.grown, stopped.grown);
+}
+
 // A later round that lays out a line an earlier round grew reuses its pieces, and one that
 // seeds where an earlier round did, with the same free runs, reuses that search's lines: on
 // this face both happen with the defaults (regrown > 0, seeds_reused > 0; the face is chosen
