@@ -189,8 +189,8 @@ TEST(Decompose, GrowthStopsAtTheFirstCandidateThatCoversTheTargetAlone) {
 
 // A growth batch that adds less than min_round_gain to the pool's greedy cover ends the
 // round's growth. On the cone part the first batch grows the patch that covers it; with a
-// target no patch reaches, the second batch adds nothing and no third is grown, while with no
-// minimum gain growth goes on through the ranked candidates.
+// target no patch reaches, the second batch adds less than 1% and no third is grown, while
+// with no minimum gain growth goes on through the ranked candidates.
 TEST(Decompose, ABatchThatAddsTooLittleEndsTheRoundsGrowth) {
   const SynthResult part = testing::paper_part(PaperTool::cone, 61, 21);
   const SurfaceIndex index(part.mesh);
