@@ -337,7 +337,7 @@ DecomposeResult decompose(const SurfaceIndex& index, const DecomposeOptions& o, 
           if (p.covered_area >= o.coverage_target * cover.total_area) return true;
         return false;
       };
-      parallel_invoke_each(batch.size(), [&](std::size_t) {
+      const auto grow = [&](std::size_t) {
         const std::size_t k = next_task++;
         if (enough) return;
         if (known[k]) grown[k] = *known[k];
@@ -346,7 +346,19 @@ DecomposeResult decompose(const SurfaceIndex& index, const DecomposeOptions& o, 
         done[k] = 1;
         while (!enough && kept < batch.size() && done[kept])
           if (covers_alone(grown[kept++])) enough = true;
-      });
+      };
+      // Candidates whose probe sweep passed over the target's area may cover it alone: in rank
+      // order, each is grown by itself, with both threads inside its fits and evaluations,
+      // until one does or the next could not; the rest of the batch then grows concurrently.
+      // Grown side by side instead, a candidate that covers the part alone took as long as on
+      // one thread, while the next was grown for nothing (the 13k cone part, cone cutters: fit
+      // 45 ms on 1 thread, 50 ms on 2). The same candidates are kept either way. Real faces,
+      // whose best line passes over under half of the part, never grow this way.
+      std::size_t first = 0;
+      while (first < batch.size() && !enough &&
+             batch[first]->estimate >= o.coverage_target * cover.total_area)
+        grow(first++);
+      parallel_invoke_each(batch.size() - first, grow);
       // The cache after the batch: known[] points into it.
       for (std::size_t k = 0; k < kept; ++k)
         if (o.reuse_grown && !known[k])

@@ -7,6 +7,8 @@
 
 #include <cstdio>
 #include <mutex>
+#include <set>
+#include <sstream>
 #include <string>
 
 #include "io/read_mesh.h"
@@ -185,6 +187,35 @@ TEST(Decompose, GrowthStopsAtTheFirstCandidateThatCoversTheTargetAlone) {
   const DecomposeResult all = decompose(index, unreachable);
   ASSERT_LT(all.coverage, 1.0);  // no patch covers every vertex: none reaches the target alone
   EXPECT_GE(all.grown + all.regrown, o.batch);
+}
+
+// A first candidate whose probe sweep passed over the target's area is grown alone, with both
+// threads inside its fit, before the rest of its batch: on a part one sweep covers, no second
+// candidate is grown beside it for nothing (it was, at two threads, and the growth took as
+// long as on one). Counted from the trace's lines of grown pieces, one candidate per seed and
+// length.
+TEST(Decompose, AFirstCandidateThatMayCoverThePartIsGrownAlone) {
+  const SynthResult part = testing::paper_part(PaperTool::cone, 61, 21);
+  const SurfaceIndex index(part.mesh);
+  DecomposeOptions o = defaults(index, CutterKind::cone);
+  ASSERT_GE(o.batch, 2);
+  for (int threads : {1, 2}) {
+    ThreadLimit limit(threads);
+    std::mutex mutex;
+    std::set<std::string> candidates;
+    o.trace = [&](const std::string& line) {
+      if (line.rfind("grow seed ", 0) != 0) return;
+      const std::lock_guard<std::mutex> lock(mutex);
+      std::istringstream words(line);
+      std::string grow, seed, id, l, length;
+      words >> grow >> seed >> id >> l >> length;  // "grow seed S L length ..."
+      candidates.insert(id + " " + length);
+    };
+    const DecomposeResult r = decompose(index, o);
+    EXPECT_GE(r.coverage, o.coverage_target);
+    EXPECT_EQ(r.grown, 1);
+    EXPECT_EQ(candidates.size(), 1u) << threads << " threads";
+  }
 }
 
 // A growth batch that adds less than min_round_gain to the pool's greedy cover ends the
