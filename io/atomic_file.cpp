@@ -33,19 +33,31 @@ bool write_all(int fd, const std::string& data) {
   return true;
 }
 
-}  // namespace
-
-void write_file_atomic(const std::filesystem::path& path,
-                       const std::function<void(std::ostream&)>& fill) {
+// The folder `path` goes into: it must exist.
+std::filesystem::path folder_of(const std::filesystem::path& path) {
   namespace fs = std::filesystem;
   const fs::path dir = path.parent_path().empty() ? fs::path(".") : path.parent_path();
   std::error_code ec;
   if (!fs::is_directory(dir, ec)) throw Error(path.string() + ": output folder does not exist");
+  return dir;
+}
+
+}  // namespace
+
+void write_file_atomic(const std::filesystem::path& path,
+                       const std::function<void(std::ostream&)>& fill) {
+  folder_of(path);  // before the work of filling
   // The whole file first, in memory: a writer that throws leaves nothing on disk.
   std::ostringstream buffer;
   fill(buffer);
   if (!buffer) throw Error(path.string() + ": could not format the output");
-  const std::string data = std::move(buffer).str();
+  write_file_atomic(path, std::move(buffer).str());
+}
+
+void write_file_atomic(const std::filesystem::path& path, const std::string& data) {
+  namespace fs = std::filesystem;
+  const fs::path dir = folder_of(path);
+  std::error_code ec;
   // mkstemp creates the temporary exclusively (O_CREAT | O_EXCL): it never opens an existing
   // file or follows a symlink planted under a guessed name.
   std::string tmpl = (dir / (".tmp-" + path.filename().string() + "-XXXXXX")).string();

@@ -11,6 +11,7 @@
 #include <filesystem>
 #include <limits>
 #include <string>
+#include <utility>
 
 namespace flank::io {
 
@@ -33,7 +34,10 @@ class Bytes {
     le(bits, 8);
   }
   void text(const std::string& s) { data_ += s; }
+  // Room for this many more bytes: a writer that knows its size appends without regrowing.
+  void reserve(std::size_t more) { data_.reserve(data_.size() + more); }
   const std::string& str() const { return data_; }
+  std::string take() && { return std::move(data_); }
 
  private:
   // Out-of-range values become ±inf without an overflow exception (Debug tests trap them).
@@ -43,8 +47,11 @@ class Bytes {
       return v > 0 ? std::numeric_limits<float>::infinity() : -std::numeric_limits<float>::infinity();
     return static_cast<float>(v);
   }
+  // One append per value, not one per byte: the envelopes of a blade face are 15 MB.
   void le(std::uint64_t v, int bytes) {
-    for (int k = 0; k < bytes; ++k) data_.push_back(static_cast<char>((v >> (8 * k)) & 0xffu));
+    char out[8];
+    for (int k = 0; k < bytes; ++k) out[k] = static_cast<char>((v >> (8 * k)) & 0xffu);
+    data_.append(out, static_cast<std::size_t>(bytes));
   }
   std::string data_;
 };

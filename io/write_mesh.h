@@ -4,6 +4,7 @@
 
 #include <filesystem>
 #include <functional>
+#include <string>
 #include <ostream>
 
 #include "kernels/mesh.h"
@@ -14,6 +15,8 @@ namespace flank::io {
 // Throws io::Error (and removes the temporary) if anything fails.
 void write_file_atomic(const std::filesystem::path& path,
                        const std::function<void(std::ostream&)>& fill);
+// The same with the whole file already in memory (no copy through a stream).
+void write_file_atomic(const std::filesystem::path& path, const std::string& data);
 
 // A plain triangle mesh, format by extension: .stl (binary), .obj, .ply (binary little-endian).
 void write_mesh(const std::filesystem::path& path, const Mesh& mesh);

@@ -282,6 +282,9 @@ void write_envelopes_ply(const fs::path& path, const std::vector<Patch>& patches
          "property uchar red\nproperty uchar green\nproperty uchar blue\nproperty int patch\n"
          "element face " + std::to_string(faces) +
          "\nproperty list uchar int vertex_indices\nend_header\n");
+  // A vertex: x, y, z, error (float), red, green, blue (uchar), patch (int); a face: 3, then
+  // three ints.
+  b.reserve(static_cast<std::size_t>(vertices) * 23 + static_cast<std::size_t>(faces) * 13);
   for (const Patch& p : patches) {
     const EnvelopeMesh& env = p.envelope;
     for (Eigen::Index i = 0; i < env.V.rows(); ++i) {
@@ -297,7 +300,7 @@ void write_envelopes_ply(const fs::path& path, const std::vector<Patch>& patches
     append_faces(b, p.envelope.F, offset);
     offset += static_cast<int>(p.envelope.V.rows());
   }
-  write_file_atomic(path, [&](std::ostream& out) { out << b.str(); });
+  write_file_atomic(path, std::move(b).take());
 }
 
 void write_design_ply(const fs::path& path, const Mesh& mesh, const std::vector<int>& vertex_patch) {
@@ -319,7 +322,7 @@ void write_design_ply(const fs::path& path, const Mesh& mesh, const std::vector<
     b.i32(id < 0 ? -1 : id);
   }
   append_faces(b, mesh.F, 0);
-  write_file_atomic(path, [&](std::ostream& out) { out << b.str(); });
+  write_file_atomic(path, std::move(b).take());
 }
 
 void write_toolpath_apt(const fs::path& path, const std::vector<Patch>& patches,

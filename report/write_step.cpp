@@ -257,6 +257,13 @@ bool exact_omega_grid(const Patch& p, int& rows, int& cols, Points& fine, FaceDo
   Points all(static_cast<Eigen::Index>(fr) * fc, 3);
   std::vector<char> valid(static_cast<std::size_t>(fr) * fc, 0);
   auto V = [&](int a, int b) -> Vec3 { return env.V.row(static_cast<Eigen::Index>(a) * env.cols + b).transpose(); };
+  // The cutter's radius and slope depend on the column only.
+  std::vector<double> radius(static_cast<std::size_t>(fc)), slope(static_cast<std::size_t>(fc));
+  for (int j = 0; j < fc; ++j) {
+    const double s = j / static_cast<double>(fc - 1);
+    radius[static_cast<std::size_t>(j)] = p.cutter.radius(s);
+    slope[static_cast<std::size_t>(j)] = p.cutter.slope(s);
+  }
   for (int i = 0; i < fr; ++i) {
     const double t = i / static_cast<double>(fr - 1);
     const Line l = p.motion.ruling(t);
@@ -273,7 +280,7 @@ bool exact_omega_grid(const Patch& p, int& rows, int& cols, Points& fine, FaceDo
       const Vec3 near = (1 - wu) * ((1 - wv) * V(i0, j0) + wv * V(i0, j0 + 1)) +
                         wu * ((1 - wv) * V(i0 + 1, j0) + wv * V(i0 + 1, j0 + 1));
       const Vec3 centre = l.point(s), rs = l.b - l.a, rt = (1 - s) * at + s * bt;
-      const double d = p.cutter.radius(s), dd = p.cutter.slope(s);
+      const double d = radius[static_cast<std::size_t>(j)], dd = slope[static_cast<std::size_t>(j)];
       const EnvelopePoint plus = envelope_point(centre, rt, rs, d, dd, +1);
       const EnvelopePoint minus = envelope_point(centre, rt, rs, d, dd, -1);
       const std::size_t k = static_cast<std::size_t>(i) * fc + j;

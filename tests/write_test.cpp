@@ -223,6 +223,19 @@ TEST_F(Write, BadDestinationThrows) {
     EXPECT_EQ(std::string(e.what()).rfind(missing.string() + ": ", 0), 0u) << e.what();
   }
   EXPECT_THROW(write_patches_json(missing.parent_path() / "patches.json", {}, {}), Error);
+  // The PLY writers hand their bytes over whole (no stream): the same refusal, no temporary.
+  for (const char* name : {"envelopes.ply", "design.ply"}) {
+    const fs::path ply = missing.parent_path() / name;
+    try {
+      if (name[0] == 'e')
+        write_envelopes_ply(ply, {make_patch(0, 'a', 0.0)}, 0.01);
+      else
+        write_design_ply(ply, m, std::vector<int>(static_cast<std::size_t>(m.vertex_count()), -1));
+      ADD_FAILURE() << name;
+    } catch (const Error& e) {
+      EXPECT_EQ(std::string(e.what()), ply.string() + ": output folder does not exist");
+    }
+  }
   EXPECT_EQ(entries(), 0);
 }
 
