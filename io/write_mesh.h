@@ -4,8 +4,8 @@
 
 #include <filesystem>
 #include <functional>
-#include <string>
 #include <ostream>
+#include <string>
 
 #include "kernels/mesh.h"
 

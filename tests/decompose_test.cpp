@@ -189,32 +189,37 @@ TEST(Decompose, GrowthStopsAtTheFirstCandidateThatCoversTheTargetAlone) {
   EXPECT_GE(all.grown + all.regrown, o.batch);
 }
 
-// A first candidate whose probe sweep passed over the target's area is grown alone, with both
-// threads inside its fit, before the rest of its batch: on a part one sweep covers, no second
-// candidate is grown beside it for nothing (it was, at two threads, and the growth took as
-// long as on one). Counted from the trace's lines of grown pieces, one candidate per seed and
-// length.
-TEST(Decompose, AFirstCandidateThatMayCoverThePartIsGrownAlone) {
+// Candidates whose probe sweep passed over the target's area are grown one at a time, with both
+// threads inside each, until one covers the target alone: on a part one sweep covers, no
+// candidate is grown beside it and dropped (at two threads one to four were, and the growth
+// took as long as on one thread). Counted from the trace's lines of grown pieces, one
+// candidate per seed and length: every candidate grown is one kept, with cone cutters and with
+// every kind allowed (more kinds, other lines ranked first).
+TEST(Decompose, CandidatesThatMayCoverThePartAreGrownOneAtATime) {
   const SynthResult part = testing::paper_part(PaperTool::cone, 61, 21);
   const SurfaceIndex index(part.mesh);
-  DecomposeOptions o = defaults(index, CutterKind::cone);
-  ASSERT_GE(o.batch, 2);
-  for (int threads : {1, 2}) {
-    ThreadLimit limit(threads);
-    std::mutex mutex;
-    std::set<std::string> candidates;
-    o.trace = [&](const std::string& line) {
-      if (line.rfind("grow seed ", 0) != 0) return;
-      const std::lock_guard<std::mutex> lock(mutex);
-      std::istringstream words(line);
-      std::string grow, seed, id, l, length;
-      words >> grow >> seed >> id >> l >> length;  // "grow seed S L length ..."
-      candidates.insert(id + " " + length);
-    };
-    const DecomposeResult r = decompose(index, o);
-    EXPECT_GE(r.coverage, o.coverage_target);
-    EXPECT_EQ(r.grown, 1);
-    EXPECT_EQ(candidates.size(), 1u) << threads << " threads";
+  for (const bool every_kind : {false, true}) {
+    DecomposeOptions o = defaults(index, CutterKind::cone);
+    if (every_kind) o.kinds = DecomposeOptions{}.kinds;
+    ASSERT_GE(o.batch, 2);
+    for (int threads : {1, 2}) {
+      ThreadLimit limit(threads);
+      std::mutex mutex;
+      std::set<std::string> candidates;
+      o.trace = [&](const std::string& line) {
+        if (line.rfind("grow seed ", 0) != 0) return;
+        const std::lock_guard<std::mutex> lock(mutex);
+        std::istringstream words(line);
+        std::string grow, seed, id, l, length;
+        words >> grow >> seed >> id >> l >> length;  // "grow seed S L length ..."
+        candidates.insert(id + " " + length);
+      };
+      const DecomposeResult r = decompose(index, o);
+      report(every_kind ? "cone 61x21, every kind" : "cone 61x21, cone cutters", r, index.diagonal());
+      EXPECT_GE(r.coverage, o.coverage_target);
+      EXPECT_EQ(r.grown, 1) << threads << " threads";
+      EXPECT_EQ(static_cast<int>(candidates.size()), r.grown) << threads << " threads";
+    }
   }
 }
 
