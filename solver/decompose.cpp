@@ -332,12 +332,13 @@ DecomposeResult decompose(const SurfaceIndex& index, const DecomposeOptions& o, 
       std::atomic<bool> enough{false};
       std::vector<char> done(batch.size(), 0);
       std::size_t kept = 0;  // grown[0, kept) are kept
+      const double target_area = o.coverage_target * cover.total_area;
       const auto covers_alone = [&](const Grown& g) {
         for (const Patch& p : g.patches)
-          if (p.covered_area >= o.coverage_target * cover.total_area) return true;
+          if (p.covered_area >= target_area) return true;
         return false;
       };
-      const auto grow = [&](std::size_t) {
+      const auto grow_next = [&] {  // the next candidate in rank order
         const std::size_t k = next_task++;
         if (enough) return;
         if (known[k]) grown[k] = *known[k];
@@ -355,10 +356,8 @@ DecomposeResult decompose(const SurfaceIndex& index, const DecomposeOptions& o, 
       // 45 ms on 1 thread, 50 ms on 2). The same candidates are kept either way. Real faces,
       // whose best line passes over under half of the part, never grow this way.
       std::size_t first = 0;
-      while (first < batch.size() && !enough &&
-             batch[first]->estimate >= o.coverage_target * cover.total_area)
-        grow(first++);
-      parallel_invoke_each(batch.size() - first, grow);
+      for (; first < batch.size() && !enough && batch[first]->estimate >= target_area; ++first) grow_next();
+      parallel_invoke_each(batch.size() - first, [&](std::size_t) { grow_next(); });
       // The cache after the batch: known[] points into it.
       for (std::size_t k = 0; k < kept; ++k)
         if (o.reuse_grown && !known[k])
