@@ -352,6 +352,8 @@ struct SurfaceIndex::Impl {
   bool masked_on_boundary(int f, int region, const char* mask) const;
   void build_scene();
   void build_tree(std::span<const Corners> corners, double pad);
+  // The Embree scene or the box tree, whichever the engine queries (after the corners).
+  void build_search(std::span<const Corners> corners, double pad);
 
   // Only faces within max_distance count (infinity: all), and only those with mask[f] != 0
   // (null: all), as if the index held those alone.
@@ -754,18 +756,29 @@ SurfaceIndex::SurfaceIndex(const Mesh& mesh, QueryEngine engine, double reach)
     m.face_corners = std::move(corners);
     return;
   }
-  {
-    const Buffer<KeyedIndex> edges = sorted_edge_slots(mesh);
-    m.build_boundary(edges);
-  }
-  if (m.engine == QueryEngine::kEmbree) {
-    m.triangles.resize(corners.size());
+  // The boundary (from the sorted edges) and the search structure are independent and each
+  // writes its own members, so they are built side by side: the other thread takes the
+  // edges' work while the tree's top splits run on one.
+  parallel_invoke_each(2, [&](std::size_t task) {
+    if (task == 0) {
+      const Buffer<KeyedIndex> edges = sorted_edge_slots(mesh);
+      m.build_boundary(edges);
+    } else {
+      m.build_search(corners, 1e-12 * scale);
+    }
+  });
+}
+
+void SurfaceIndex::Impl::build_search(std::span<const Corners> corners, double pad) {
+  const int nf = mesh.face_count();
+  if (engine == QueryEngine::kEmbree) {
+    triangles.resize(corners.size());
     for (int f = 0; f < nf; ++f) {
       const Corners& c = corners[static_cast<std::size_t>(f)];
-      Triangle& t = m.triangles[static_cast<std::size_t>(f)];
+      Triangle& t = triangles[static_cast<std::size_t>(f)];
       t.a = c.a, t.b = c.b, t.c = c.c;
       t.centre = (t.a + t.b + t.c) / 3.0;
-      const Vec3 n = m.normals.row(f);
+      const Vec3 n = normals.row(f);
       t.normal = n.allFinite() ? n : Vec3::Zero();
       // Rounded up a little: the disc must hold the triangle whatever the rounding.
       t.radius = std::max({(t.a - t.centre).norm(), (t.b - t.centre).norm(), (t.c - t.centre).norm()}) *
@@ -773,11 +786,11 @@ SurfaceIndex::SurfaceIndex(const Mesh& mesh, QueryEngine engine, double reach)
       t.thickness = t.normal == Vec3::Zero()
                         ? 0.0
                         : 2.0 * std::max({std::abs(t.normal.dot(t.a - t.centre)), std::abs(t.normal.dot(t.b - t.centre)),
-                                          std::abs(t.normal.dot(t.c - t.centre))}) + m.on_surface;
+                                          std::abs(t.normal.dot(t.c - t.centre))}) + on_surface;
     }
-    m.build_scene();
+    build_scene();
   } else {
-    m.build_tree(corners, 1e-12 * scale);
+    build_tree(corners, pad);
   }
 }
 
