@@ -43,28 +43,30 @@ void CellGrid::range_of(const Vec3& lo, const Vec3& hi, std::int64_t* r) const {
 
 std::size_t CellGrid::probe(std::uint64_t key) const {
   std::uint64_t s = (key * 0x9E3779B97F4A7C15ull) >> shift_;  // Fibonacci hashing
-  while (table_[s].key != key && table_[s].key != kEmpty) s = (s + 1) & mask_;
+  for (std::int32_t c = table_[s]; c >= 0 && keys_[static_cast<std::size_t>(c)] != key; c = table_[s])
+    s = (s + 1) & mask_;
   return static_cast<std::size_t>(s);
 }
 
 void CellGrid::resize_table(std::size_t capacity) {
-  std::vector<Slot> old = std::move(table_);
-  table_.assign(capacity, Slot{kEmpty, -1});
+  table_.assign(capacity, -1);
   mask_ = capacity - 1;
   shift_ = 64 - std::countr_zero(capacity);
-  for (const Slot& s : old)
-    if (s.key != kEmpty) table_[probe(s.key)] = s;
+  for (std::size_t c = 0; c < cells_; ++c) table_[probe(keys_[c])] = static_cast<std::int32_t>(c);
 }
 
 std::int32_t CellGrid::cell_of(std::uint64_t key) {
   std::size_t s = probe(key);
-  if (table_[s].key == key) return table_[s].cell;
+  if (table_[s] >= 0) return table_[s];
   if (2 * (cells_ + 1) > table_.size()) {
+    keys_.push_back(key);  // found by the rehash
+    ++cells_;
     resize_table(2 * table_.size());
-    s = probe(key);
+    return static_cast<std::int32_t>(cells_ - 1);
   }
-  table_[s] = {key, static_cast<std::int32_t>(cells_++)};
-  return table_[s].cell;
+  keys_.push_back(key);
+  table_[s] = static_cast<std::int32_t>(cells_++);
+  return table_[s];
 }
 
 CellGrid::CellGrid(std::span<const Vec3> lo, std::span<const Vec3> hi) {
@@ -100,48 +102,58 @@ CellGrid::CellGrid(std::span<const Vec3> lo, std::span<const Vec3> hi) {
   }
 
   // The occupied cells, numbered in item order, and their item counts; then each cell's items
-  // in item order. Neighbouring boxes share most of their cells, so the table is sized by
-  // the cells met, not by the pairs (a table per pair was most of the cost of the index).
+  // in item order. The table grows with the cells met, from 16 slots: one item's box shares
+  // most cells with its neighbours' (a table per pair was most of the cost of
+  // the index, and on Ω's grid of the 13k part, 104k faces in 41k cells, a table sized by
+  // pairs/4 took 4 MB whose first touch alone took 13 ms). The second pass finds each pair's
+  // cell again rather than keeping it from the first: fresh memory costs more than the
+  // lookup.
   const auto total = static_cast<std::size_t>(pairs);  // exact: at most 16 per item here
-  resize_table(std::bit_ceil(std::max<std::size_t>(total / 4, 16)));
-  std::vector<std::int32_t> count;
-  // Each pair's cell, as the count meets it: the fill then reads them in order, with no box
-  // ranges or hash probes again.
-  Buffer<std::int32_t> pair_cell(total);  // written before read: not zeroed first
-  Buffer<std::int32_t> spans(n);          // each item's number of cells
-  std::size_t j = 0;
-  for (std::size_t i = 0; i < n; ++i) {
+  resize_table(16);
+  // The cells met lately, by coordinates: neighbouring items (a mesh's faces mostly come in
+  // surface order) meet the same few cells again and find them here. A cache only: the
+  // cells and their numbers are what the table alone gives.
+  struct Recent {
+    std::uint64_t key = kEmpty;
+    std::int32_t cell = -1;
+  };
+  std::array<Recent, 64> recent;
+  const auto for_each_cell = [&](std::size_t i, auto&& f) {
     range_of(lo[i], hi[i], r);
-    const std::size_t first = j;
     for (std::int64_t z = r[2]; z <= r[5]; ++z)
       for (std::int64_t y = r[1]; y <= r[4]; ++y)
         for (std::int64_t x = r[0]; x <= r[3]; ++x) {
-          const std::int32_t c = cell_of(key_of(x, y, z));
-          if (static_cast<std::size_t>(c) == count.size()) count.push_back(0);
-          ++count[static_cast<std::size_t>(c)];
-          pair_cell[j++] = c;
+          const std::uint64_t key = key_of(x, y, z);
+          Recent& seen = recent[static_cast<std::size_t>((x + 3 * y + 5 * z) & 63)];
+          if (seen.key != key) seen = {key, cell_of(key)};
+          f(seen.cell);
         }
-    spans[i] = static_cast<std::int32_t>(j - first);
-  }
-  assert(j == total);
+  };
+  std::vector<std::int32_t> count;
+  for (std::size_t i = 0; i < n; ++i)
+    for_each_cell(i, [&](std::int32_t c) {
+      if (static_cast<std::size_t>(c) == count.size()) count.push_back(0);
+      ++count[static_cast<std::size_t>(c)];
+    });
   start_.resize(cells_ + 1);
   start_[0] = 0;
   for (std::size_t c = 0; c < cells_; ++c) start_[c + 1] = start_[c] + count[c];
+  assert(static_cast<std::size_t>(start_[cells_]) == total);
   items_.resize(total);
   for (std::size_t c = 0; c < cells_; ++c) count[c] = start_[c];  // now each cell's next place
-  j = 0;
   for (std::size_t i = 0; i < n; ++i)
-    for (std::int32_t m = 0; m < spans[i]; ++m)
-      items_[static_cast<std::size_t>(count[static_cast<std::size_t>(pair_cell[j++])]++)] = static_cast<std::int32_t>(i);
+    for_each_cell(i, [&](std::int32_t c) {
+      items_[static_cast<std::size_t>(count[static_cast<std::size_t>(c)]++)] = static_cast<std::int32_t>(i);
+    });
 }
 
 std::span<const std::int32_t> CellGrid::items_at(const Vec3& p) const {
   const std::int64_t x = coordinate(p.x(), 0), y = coordinate(p.y(), 1), z = coordinate(p.z(), 2);
   if (x < 0 || y < 0 || z < 0 || table_.empty()) return {};
-  const Slot& slot = table_[probe(key_of(x, y, z))];
-  if (slot.key == kEmpty) return {};
-  const auto b = static_cast<std::size_t>(start_[static_cast<std::size_t>(slot.cell)]);
-  const auto e = static_cast<std::size_t>(start_[static_cast<std::size_t>(slot.cell) + 1]);
+  const std::int32_t cell = table_[probe(key_of(x, y, z))];
+  if (cell < 0) return {};
+  const auto b = static_cast<std::size_t>(start_[static_cast<std::size_t>(cell)]);
+  const auto e = static_cast<std::size_t>(start_[static_cast<std::size_t>(cell) + 1]);
   return {items_.data() + b, e - b};
 }
 

@@ -32,10 +32,6 @@ class CellGrid {
   std::size_t slots() const { return table_.size(); }
 
  private:
-  struct Slot {
-    std::uint64_t key;  // kEmpty when free
-    std::int32_t cell;  // the occupied cell's number, in order of first use
-  };
   // The cell coordinate of x along axis k, or -1 beyond the grid.
   std::int64_t coordinate(double x, int k) const;
   // The cell ranges of the box [lo, hi] (x, y, z lows, then highs).
@@ -49,9 +45,11 @@ class CellGrid {
   Vec3 origin_ = Vec3::Zero();
   double cell_ = 1.0, inverse_ = 1.0;
   std::int64_t dims_[3] = {0, 0, 0};
-  // Open addressing over the occupied cells only (kept at most half full): cell c's items are
+  // Open addressing over the occupied cells only (kept at most half full): a slot holds a
+  // cell's number (-1 when free), keys_[c] is cell c's key, and its items are
   // items_[start_[c], start_[c + 1]).
-  std::vector<Slot> table_;
+  std::vector<std::int32_t> table_;
+  std::vector<std::uint64_t> keys_;
   std::vector<std::int32_t> start_;
   std::vector<std::int32_t> items_;
   std::uint64_t mask_ = 0;
