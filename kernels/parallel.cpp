@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <exception>
 #include <thread>
 #include <vector>
 #else
@@ -13,6 +14,7 @@
 #include <tbb/parallel_for.h>
 #include <tbb/parallel_sort.h>
 #include <tbb/task_arena.h>
+#include <tbb/task_group.h>
 #endif
 
 namespace flank {
@@ -54,6 +56,30 @@ void parallel_invoke_each(std::size_t count, const std::function<void(std::size_
 
 void parallel_sort(std::span<KeyedIndex> items) { std::sort(items.begin(), items.end()); }
 
+void run_beside(const std::function<void()>& beside, const std::function<void()>& here) {
+  if (max_threads() < 2) {
+    here();
+    beside();
+    return;
+  }
+  std::exception_ptr failed;
+  std::thread other([&] {
+    try {
+      beside();
+    } catch (...) {
+      failed = std::current_exception();
+    }
+  });
+  try {
+    here();
+  } catch (...) {
+    other.join();
+    throw;
+  }
+  other.join();
+  if (failed) std::rethrow_exception(failed);
+}
+
 struct ThreadLimit::Impl {
   int previous = 0;
 };
@@ -90,6 +116,21 @@ void parallel_for(std::size_t begin, std::size_t end,
 
 void parallel_sort(std::span<KeyedIndex> items) {
   tbb::parallel_sort(items.begin(), items.end());
+}
+
+void run_beside(const std::function<void()>& beside, const std::function<void()>& here) {
+  tbb::task_group group;
+  group.run([&] { beside(); });
+  try {
+    here();
+  } catch (...) {
+    try {
+      group.wait();
+    } catch (...) {  // what `here` threw is the one reported
+    }
+    throw;
+  }
+  group.wait();  // rethrows what `beside` threw
 }
 
 void parallel_invoke_each(std::size_t count, const std::function<void(std::size_t)>& task) {

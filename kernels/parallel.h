@@ -20,6 +20,14 @@ void parallel_for(std::size_t begin, std::size_t end,
 // Runs the tasks concurrently (one task each) and returns when all are done.
 void parallel_invoke_each(std::size_t count, const std::function<void(std::size_t)>& task);
 
+// Runs `here` on the calling thread and `beside` concurrently with it (on another thread when
+// one is free, else on this one after `here`); returns when both are done, rethrowing what
+// either threw. For two independent builds where one makes the large allocations: made on the
+// calling thread they come from the main heap, which keeps what it frees (kernels/memory.h);
+// a worker thread's heap unmaps whatever outgrows its first 64 MiB once it is freed, and the
+// next build faults those pages in again.
+void run_beside(const std::function<void()>& beside, const std::function<void()>& here);
+
 // A key and the index it belongs to, ordered by both. Trivial: a buffer of them costs no
 // writes until a parallel loop fills it (see Buffer).
 struct KeyedIndex {

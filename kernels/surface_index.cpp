@@ -3,6 +3,7 @@
 #include <embree3/rtcore.h>
 
 #include <algorithm>
+#include <array>
 #include <atomic>
 #include <bit>
 #include <cassert>
@@ -97,9 +98,8 @@ inline Vec3 closest_on_triangle(const Vec3& p, const Vec3& a, const Vec3& b, con
   return a + (vb * inv) * ab + (vc * inv) * ac;
 }
 
-struct Corners {
-  Vec3 a, b, c;
-};
+// A triangle's corners, as the box tree reads them: the index keeps them in the tree's order.
+using Corners = std::array<Vec3, 3>;
 
 struct Triangle {
   Vec3 a, b, c;
@@ -267,9 +267,10 @@ namespace {
 
 // Every edge slot (3 f + k: edge (k, k + 1 mod 3) of face f) keyed by its vertex pair, sorted:
 // the slots of one edge are adjacent.
-Buffer<KeyedIndex> sorted_edge_slots(const Mesh& mesh) {
+// Into `edges` (3 per face).
+void fill_sorted_edge_slots(const Mesh& mesh, std::span<KeyedIndex> edges) {
   const int nf = mesh.face_count();
-  Buffer<KeyedIndex> edges(static_cast<std::size_t>(nf) * 3);
+  assert(edges.size() == static_cast<std::size_t>(nf) * 3);
   parallel_for(0, static_cast<std::size_t>(nf), [&](std::size_t begin, std::size_t end) {
     for (std::size_t f = begin; f < end; ++f)
       for (int k = 0; k < 3; ++k) {
@@ -281,6 +282,11 @@ Buffer<KeyedIndex> sorted_edge_slots(const Mesh& mesh) {
       }
   }, 4096);
   parallel_sort(edges);
+}
+
+Buffer<KeyedIndex> sorted_edge_slots(const Mesh& mesh) {
+  Buffer<KeyedIndex> edges(static_cast<std::size_t>(mesh.face_count()) * 3);
+  fill_sorted_edge_slots(mesh, edges);
   return edges;
 }
 
@@ -586,7 +592,7 @@ void visit_leaf(const LeafPack& k, const Corners* corners, const std::vector<int
     if (st.best_d2 < kInf && static_cast<double>(d[lane]) > threshold()) break;
     const std::size_t pos = static_cast<std::size_t>(k.first + lane);
     const Corners& c = corners[pos];
-    st.exact(faces[pos], c.a, c.b, c.c);
+    st.exact(faces[pos], c[0], c[1], c[2]);
     todo &= ~(std::uint32_t{1} << lane);
   }
 }
@@ -657,13 +663,13 @@ ClosestPoint SurfaceIndex::Impl::query_once(const Vec3& p, int hint_face, double
     for (const std::int32_t f : cells.items_at(p)) {
       if (mask && !mask[f]) continue;
       const Corners& c = face_corners[static_cast<std::size_t>(f)];
-      state.exact(f, c.a, c.b, c.c);
+      state.exact(f, c[0], c[1], c[2]);
     }
   } else {
     // The hint's exact distance bounds the search from the start.
     if (hinted) {
       const Corners& c = leaf_corners[static_cast<std::size_t>(face_position[static_cast<std::size_t>(hint_face)])];
-      state.exact(hint_face, c.a, c.b, c.c);
+      state.exact(hint_face, c[0], c[1], c[2]);
     }
     tree.nearest(p, state.best_d2, [&](std::int32_t leaf) {
       visit_leaf(packs[static_cast<std::size_t>(leaf)], leaf_corners.data(), tree.order(), state);
@@ -748,8 +754,8 @@ SurfaceIndex::SurfaceIndex(const Mesh& mesh, QueryEngine engine, double reach)
       std::vector<Vec3> lo(static_cast<std::size_t>(nf)), hi(static_cast<std::size_t>(nf));
       for (std::size_t f = 0; f < corners.size(); ++f) {
         const Corners& c = corners[f];
-        lo[f] = (c.a.cwiseMin(c.b).cwiseMin(c.c).array() - grow).matrix();
-        hi[f] = (c.a.cwiseMax(c.b).cwiseMax(c.c).array() + grow).matrix();
+        lo[f] = (c[0].cwiseMin(c[1]).cwiseMin(c[2]).array() - grow).matrix();
+        hi[f] = (c[0].cwiseMax(c[1]).cwiseMax(c[2]).array() + grow).matrix();
       }
       m.cells = CellGrid(lo, hi);
     });
@@ -758,15 +764,18 @@ SurfaceIndex::SurfaceIndex(const Mesh& mesh, QueryEngine engine, double reach)
   }
   // The boundary (from the sorted edges) and the search structure are independent and each
   // writes its own members, so they are built side by side: the other thread takes the
-  // edges' work while the tree's top splits run on one.
-  parallel_invoke_each(2, [&](std::size_t task) {
-    if (task == 0) {
-      const Buffer<KeyedIndex> edges = sorted_edge_slots(mesh);
-      m.build_boundary(edges);
-    } else {
-      m.build_search(corners, 1e-12 * scale);
-    }
-  });
+  // edges' work while the tree's top splits run on one. The search structure, which makes
+  // the large allocations, is built on this thread, and the edges' buffer is allocated here
+  // too: from a worker thread's heap they were unmapped when freed, and the next index of a
+  // large mesh faulted them in again (the 256k cone rung in a loop: 51k page faults before
+  // the two ran side by side, 167k after, 50k with this).
+  Buffer<KeyedIndex> edges(static_cast<std::size_t>(nf) * 3);
+  run_beside(
+      [&] {
+        fill_sorted_edge_slots(mesh, edges);
+        m.build_boundary(edges);
+      },
+      [&] { m.build_search(corners, 1e-12 * scale); });
 }
 
 void SurfaceIndex::Impl::build_search(std::span<const Corners> corners, double pad) {
@@ -776,7 +785,7 @@ void SurfaceIndex::Impl::build_search(std::span<const Corners> corners, double p
     for (int f = 0; f < nf; ++f) {
       const Corners& c = corners[static_cast<std::size_t>(f)];
       Triangle& t = triangles[static_cast<std::size_t>(f)];
-      t.a = c.a, t.b = c.b, t.c = c.c;
+      t.a = c[0], t.b = c[1], t.c = c[2];
       t.centre = (t.a + t.b + t.c) / 3.0;
       const Vec3 n = normals.row(f);
       t.normal = n.allFinite() ? n : Vec3::Zero();
@@ -799,8 +808,8 @@ namespace {
 // Lane l of pack k holds triangle c, in single precision relative to k.origin; a sliver whose
 // frame single precision cannot hold goes to k.always.
 void pack_lane(LeafPack& k, int l, const Corners& c) {
-  const Vec3 a = c.a - k.origin;
-  const Vec3 ab = c.b - c.a, ac = c.c - c.a;
+  const Vec3 a = c[0] - k.origin;
+  const Vec3 ab = c[1] - c[0], ac = c[2] - c[0];
   const double lab = ab.norm();
   Vec3 e1 = Vec3::Zero(), e2 = Vec3::Zero(), n = Vec3::Zero();
   double bx = 0, cx = 0, cy = 0;
@@ -839,13 +848,7 @@ void pack_lane(LeafPack& k, int l, const Corners& c) {
 }  // namespace
 
 void SurfaceIndex::Impl::build_tree(std::span<const Corners> corners, double pad) {
-  {
-    Buffer<std::array<Vec3, 3>> c(corners.size());
-    parallel_for(0, corners.size(), [&](std::size_t begin, std::size_t end) {
-      for (std::size_t f = begin; f < end; ++f) c[f] = {corners[f].a, corners[f].b, corners[f].c};
-    }, 4096);
-    tree = ObbTree(c, pad);
-  }
+  tree = ObbTree(corners, pad);
   const std::vector<int>& order = tree.order();
   leaf_corners = Buffer<Corners>(order.size());
   face_position = Buffer<std::int32_t>(order.size());
@@ -868,12 +871,12 @@ void SurfaceIndex::Impl::build_tree(std::span<const Corners> corners, double pad
       Vec3 sum = Vec3::Zero();
       for (int l = 0; l < k.count; ++l) {
         const Corners& c = leaf_corners[static_cast<std::size_t>(k.first + l)];
-        sum += c.a + c.b + c.c;
+        sum += c[0] + c[1] + c[2];
       }
       k.origin = sum / (3.0 * k.count);
       for (int l = 0; l < k.count; ++l) {
         const Corners& c = leaf_corners[static_cast<std::size_t>(k.first + l)];
-        for (const Vec3* v : {&c.a, &c.b, &c.c}) k.radius = std::max(k.radius, (*v - k.origin).norm());
+        for (const Vec3* v : {&c[0], &c[1], &c[2]}) k.radius = std::max(k.radius, (*v - k.origin).norm());
       }
       // Unused lanes repeat lane 0: their arithmetic stays finite, their results unread.
       for (int l = 0; l < LeafPack::kLanes; ++l)

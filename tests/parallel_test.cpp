@@ -5,6 +5,8 @@
 #include <algorithm>
 #include <cstdint>
 #include <random>
+#include <stdexcept>
+#include <thread>
 #include <utility>
 #include <vector>
 
@@ -41,6 +43,38 @@ TEST(Parallel, BufferHoldsWhatAParallelLoopWrites) {
   const Buffer<int> none(0);
   EXPECT_TRUE(none.empty());
   EXPECT_EQ(none.begin(), none.end());
+}
+
+// run_beside runs `here` on the calling thread (where the index makes its large allocations)
+// and `beside` too, at 1 and 2 threads; what either throws reaches the caller, after both
+// have finished.
+TEST(Parallel, RunBesideRunsHereOnTheCallingThreadAndBothToTheEnd) {
+  for (const int threads : {1, 2}) {
+    const ThreadLimit limit(threads);
+    const std::thread::id caller = std::this_thread::get_id();
+    std::thread::id here_on;
+    bool here_ran = false, beside_ran = false;
+    run_beside([&] { beside_ran = true; },
+               [&] {
+                 here_on = std::this_thread::get_id();
+                 here_ran = true;
+               });
+    EXPECT_TRUE(here_ran && beside_ran) << threads << " threads";
+    EXPECT_EQ(here_on, caller) << threads << " threads";
+
+    bool finished = false;
+    EXPECT_THROW(run_beside([] { throw std::runtime_error("beside"); }, [&] { finished = true; }),
+                 std::runtime_error);
+    EXPECT_TRUE(finished);
+    finished = false;
+    try {
+      run_beside([&] { finished = true; }, [] { throw std::invalid_argument("here"); });
+      ADD_FAILURE() << "nothing thrown";
+    } catch (const std::invalid_argument& e) {
+      EXPECT_STREQ(e.what(), "here");
+    }
+    EXPECT_TRUE(finished) << "beside ran to its end before the exception left";
+  }
 }
 
 }  // namespace
