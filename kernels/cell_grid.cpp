@@ -103,11 +103,11 @@ CellGrid::CellGrid(std::span<const Vec3> lo, std::span<const Vec3> hi) {
 
   // The occupied cells, numbered in item order, and their item counts; then each cell's items
   // in item order. The table grows with the cells met, from 16 slots: one item's box shares
-  // most cells with its neighbours' (a table per pair was most of the cost of
-  // the index, and on Ω's grid of the 13k part, 104k faces in 41k cells, a table sized by
-  // pairs/4 took 4 MB whose first touch alone took 13 ms). The second pass finds each pair's
-  // cell again rather than keeping it from the first: fresh memory costs more than the
-  // lookup.
+  // most cells with its neighbours'. (A table per pair was most of the cost of the index; on
+  // Ω's grid of the 13k part, 104k faces in 41k cells, a table sized by pairs / 4 took 4 MB,
+  // whose first touch alone took 13 ms.) The second pass finds each pair's cell again rather
+  // than keeping it from the first: fresh memory costs more than the lookup
+  // (BM_FirstTouch).
   const auto total = static_cast<std::size_t>(pairs);  // exact: at most 16 per item here
   resize_table(16);
   // The cells met lately, by coordinates: neighbouring items (a mesh's faces mostly come in

@@ -57,8 +57,16 @@ void parallel_invoke_each(std::size_t count, const std::function<void(std::size_
 void parallel_sort(std::span<KeyedIndex> items) { std::sort(items.begin(), items.end()); }
 
 void run_beside(const std::function<void()>& beside, const std::function<void()>& here) {
-  if (max_threads() < 2) {
-    here();
+  if (max_threads() < 2) {  // both to the end, as with two threads; `here`'s exception wins
+    try {
+      here();
+    } catch (...) {
+      try {
+        beside();
+      } catch (...) {
+      }
+      throw;
+    }
     beside();
     return;
   }

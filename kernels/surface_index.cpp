@@ -98,7 +98,7 @@ inline Vec3 closest_on_triangle(const Vec3& p, const Vec3& a, const Vec3& b, con
   return a + (vb * inv) * ab + (vc * inv) * ac;
 }
 
-// A triangle's corners, as the box tree reads them: the index keeps them in the tree's order.
+// A triangle's corners, in the form the box tree reads.
 using Corners = std::array<Vec3, 3>;
 
 struct Triangle {
