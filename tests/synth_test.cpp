@@ -14,6 +14,8 @@
 #include <string>
 #include <tuple>
 
+#include <unistd.h>
+
 #include "io/read_lines.h"
 #include "io/read_mesh.h"
 #include "kernels/bspline.h"
@@ -357,9 +359,15 @@ TEST(Synth, InvalidEnvelopeIsCounted) {
 
 class SynthMotionFile : public ::testing::Test {
  protected:
-  std::filesystem::path dir_ =
-      std::filesystem::path(::testing::TempDir()) / "flank_synth_test_motion";
-  void SetUp() override { std::filesystem::create_directories(dir_); }
+  // One folder per process and test: ctest runs this suite's tests side by side, and one's
+  // TearDown removed a shared folder under the other (a TSan pass failed so, 2026-11-27).
+  std::filesystem::path dir_;
+  void SetUp() override {
+    dir_ = std::filesystem::path(::testing::TempDir()) /
+           ("flank_synth_test_motion_" + std::to_string(::getpid()) + "_" +
+            ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    std::filesystem::create_directories(dir_);
+  }
   void TearDown() override { std::filesystem::remove_all(dir_); }
   std::string write(const std::string& name, const std::string& text) {
     const std::string path = (dir_ / name).string();
