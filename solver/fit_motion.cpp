@@ -79,6 +79,14 @@ constexpr double kMinDamping = 1e-9;
 // A step extension is tried when the parabola's minimum lies at least this many steps out.
 constexpr double kExtendBeyond = 1.5;
 
+// The profile parts have at most kSplineProfileCoefficients columns: fixed-capacity storage,
+// so that a row block (and each sample's terms) costs no heap allocation. Allocations in the
+// parallel row loop, 3000 per evaluation, held the two threads up on the allocator.
+using ProfileRow3 = Eigen::Matrix<double, 3, Eigen::Dynamic, Eigen::ColMajor, 3, kSplineProfileCoefficients>;
+using ProfileSquare = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::ColMajor,
+                                    kSplineProfileCoefficients, kSplineProfileCoefficients>;
+using ProfileVec = Eigen::Matrix<double, Eigen::Dynamic, 1, Eigen::ColMajor, kSplineProfileCoefficients, 1>;
+
 // Unknowns: per control point k the six coordinates [A_k, B_k], then the profile c.
 struct Layout {
   int K = 0;
@@ -87,6 +95,18 @@ struct Layout {
   int a(int k) const { return 6 * k; }
   int b(int k) const { return 6 * k + 3; }
   int c(int q) const { return 6 * K + q; }
+};
+
+// JᵀJ's upper triangle, stored by columns (what CHOLMOD factors, see build_pattern): the rows
+// of each column run without gaps from first[col] down to the diagonal, its last entry.
+struct UpperPattern {
+  std::vector<int> col_ptr, row_idx, first;
+  std::size_t size() const { return row_idx.size(); }
+  // The entry (row, col), for first[col] <= row <= col.
+  std::size_t at(int row, int col) const {
+    return static_cast<std::size_t>(col_ptr[col] + row - first[col]);
+  }
+  std::size_t diagonal(int col) const { return static_cast<std::size_t>(col_ptr[col + 1] - 1); }
 };
 
 struct Problem {
@@ -99,8 +119,12 @@ struct Problem {
   MatX P;                      // n by nc profile basis
   double L = 0.0;
   double W1 = 0, W2 = 0, W3 = 0, W4 = 0;
-  MatX H_fair;  // constant: W2 DᵀD
+  std::vector<double> H_fair;  // constant: W2 DᵀD, in the pattern
   bool fair_active = true;
+  UpperPattern pattern;
+  // Σ_j (W1 + W3) P_jᵀ P_j over all s_j, summed as a row's own loop sums it: the profile block
+  // of every row whose samples all lie inside Φ (most rows), bit for bit.
+  ProfileSquare Hcc_all;
 
   int m() const { return options.samples_t; }
   int n() const { return options.samples_s; }
@@ -119,8 +143,8 @@ struct Evaluation {
   std::vector<Vec3> a_i, b_i;
   VecX d;
   bool assembled = false;
-  MatX H;  // N by N (full, symmetric), once assembled
-  VecX g;  // N, once assembled
+  std::vector<double> H;  // JᵀJ's upper triangle in the pattern, once assembled
+  VecX g;                 // N, once assembled
 };
 
 void unpack(const Layout& lay, const VecX& x, Points* A, Points* B, VecX* c) {
@@ -132,14 +156,6 @@ void unpack(const Layout& lay, const VecX& x, Points* A, Points* B, VecX* c) {
   }
   *c = x.tail(lay.nc);
 }
-
-// The profile parts have at most kSplineProfileCoefficients columns: fixed-capacity storage,
-// so that a row block (and each sample's terms) costs no heap allocation. Allocations in the
-// parallel row loop, 3000 per evaluation, held the two threads up on the allocator.
-using ProfileRow3 = Eigen::Matrix<double, 3, Eigen::Dynamic, Eigen::ColMajor, 3, kSplineProfileCoefficients>;
-using ProfileSquare = Eigen::Matrix<double, Eigen::Dynamic, Eigen::Dynamic, Eigen::ColMajor,
-                                    kSplineProfileCoefficients, kSplineProfileCoefficients>;
-using ProfileVec = Eigen::Matrix<double, Eigen::Dynamic, 1, Eigen::ColMajor, kSplineProfileCoefficients, 1>;
 
 // Per-t_i contribution to JᵀJ and Jᵀr in local coordinates [A_f..A_f+3, B_f..B_f+3] (24)
 // and the profile (nc).
@@ -233,6 +249,12 @@ void assemble(Problem& pb, Evaluation& ev, FitTiming& timing) {
       rb.Ca = ProfileRow3::Zero(3, nc), rb.Cb = ProfileRow3::Zero(3, nc), rb.Hcc = ProfileSquare::Zero(nc, nc);
       rb.ga.setZero(), rb.gb.setZero();
       rb.gc = ProfileVec::Zero(nc);
+      bool all_inside = true;
+      for (int j = 0; j < n && all_inside; ++j) {
+        const ClosestPoint& f = ev.cp[static_cast<std::size_t>(i * n + j)];
+        all_inside = !f.boundary && f.face >= 0;
+      }
+      if (all_inside) rb.Hcc = pb.Hcc_all;
       for (int j = 0; j < n; ++j) {
         const ClosestPoint& f = ev.cp[static_cast<std::size_t>(i * n + j)];
         if (f.boundary || f.face < 0) continue;  // beyond Φ: no proximity information
@@ -250,7 +272,7 @@ void assemble(Problem& pb, Evaluation& ev, FitTiming& timing) {
         ProfileRow3 Hpc(3, nc);
         Hpc.noalias() = -(pb.W1 + pb.W3) * nn * Pj;
         rb.Ca += sa * Hpc, rb.Cb += sb * Hpc;
-        rb.Hcc.noalias() += (pb.W1 + pb.W3) * Pj.transpose() * Pj;
+        if (!all_inside) rb.Hcc.noalias() += (pb.W1 + pb.W3) * Pj.transpose() * Pj;
         const Vec3 gp = (pb.W1 * rho + pb.W3 * nn.dot(qv)) * nn;
         rb.ga += sa * gp, rb.gb += sb * gp;
         rb.gc -= (pb.W1 * rho + pb.W3 * nn.dot(qv)) * Pj.transpose();
@@ -264,49 +286,61 @@ void assemble(Problem& pb, Evaluation& ev, FitTiming& timing) {
   }, 4);  // rows differ in cost (samples beyond Φ are skipped): small chunks balance them
 
   const int N = lay.n();
+  const UpperPattern& up = pb.pattern;
   // Fairness acts on the update δ (W2 |D δ|², see FitOptions): it adds to JᵀJ only.
-  ev.H = pb.fair_active ? pb.H_fair : MatX::Zero(N, N);
+  ev.H = pb.fair_active ? pb.H_fair : std::vector<double>(up.size(), 0.0);
   ev.g = VecX::Zero(N);
-  // The blocks summed into JᵀJ and Jᵀr concurrently, each task owning rows of H and g: control
-  // point k's six (its a and b), or the profile's nc. Every element still receives its terms
-  // in i order, as one loop over i would add them: the sums are the same bits whatever the
-  // thread count.
+  // H(r0 + r, c0 + c) += w B(r, c) for the block's entries on or above the diagonal.
+  const auto add_block = [&](int r0, int c0, double w, const Eigen::Matrix3d& B) {
+    for (int c = 0; c < 3; ++c) {
+      const std::size_t base = up.at(r0, c0 + c);
+      const int rows = r0 == c0 ? c + 1 : 3;
+      for (int r = 0; r < rows; ++r) ev.H[base + static_cast<std::size_t>(r)] += w * B(r, c);
+    }
+  };
+  // The blocks summed into JᵀJ and Jᵀr concurrently, each task owning columns (contiguous in
+  // the pattern): control point l's six (its a and b, with g's entries there), or one profile
+  // column. Every element still receives its terms in i order, as one loop over i would add
+  // them: the sums are the same bits whatever the thread count.
   const int K = lay.K;
-  parallel_for(0, static_cast<std::size_t>(K) + 1, [&](std::size_t begin, std::size_t end) {
+  parallel_for(0, static_cast<std::size_t>(K + nc), [&](std::size_t begin, std::size_t end) {
     for (std::size_t task = begin; task < end; ++task) {
       if (task < static_cast<std::size_t>(K)) {
-        const int k = static_cast<int>(task);
-        const int ka = lay.a(k), kb = lay.b(k);
+        const int l = static_cast<int>(task);
+        const int la = lay.a(l), lb = lay.b(l);
         for (int i = 0; i < m; ++i) {
           const BasisRow& br = pb.rows[i];
-          const int kk = k - br.first;
-          if (kk < 0 || kk > kSplineDegree) continue;
+          const int ll = l - br.first;
+          if (ll < 0 || ll > kSplineDegree) continue;
           const RowBlock& rb = blocks[static_cast<std::size_t>(i)];
-          const double Nk = br.value[kk];
-          for (int l = 0; l <= kSplineDegree; ++l) {
-            const int la = lay.a(br.first + l), lb = lay.b(br.first + l);
-            const double NkNl = Nk * br.value[l];
-            ev.H.block<3, 3>(ka, la) += NkNl * rb.Maa;
-            ev.H.block<3, 3>(ka, lb) += NkNl * rb.Mab;
-            ev.H.block<3, 3>(kb, la) += NkNl * rb.Mab.transpose();
-            ev.H.block<3, 3>(kb, lb) += NkNl * rb.Mbb;
+          for (int kk = 0; kk <= ll; ++kk) {  // the control points k <= l: rows above
+            const int ka = lay.a(br.first + kk), kb = lay.b(br.first + kk);
+            const double NkNl = br.value[kk] * br.value[ll];
+            add_block(ka, la, NkNl, rb.Maa);
+            add_block(ka, lb, NkNl, rb.Mab);
+            if (kk < ll) add_block(kb, la, NkNl, rb.Mab.transpose());
+            add_block(kb, lb, NkNl, rb.Mbb);
           }
-          ev.H.block(ka, lay.c(0), 3, nc) += Nk * rb.Ca;
-          ev.H.block(kb, lay.c(0), 3, nc) += Nk * rb.Cb;
-          ev.g.segment<3>(ka) += Nk * rb.ga;
-          ev.g.segment<3>(kb) += Nk * rb.gb;
+          const double Nl = br.value[ll];
+          ev.g.segment<3>(la) += Nl * rb.ga;
+          ev.g.segment<3>(lb) += Nl * rb.gb;
         }
       } else {
+        const int q = static_cast<int>(task) - K, col = lay.c(q);
         for (int i = 0; i < m; ++i) {
           const BasisRow& br = pb.rows[i];
           const RowBlock& rb = blocks[static_cast<std::size_t>(i)];
           for (int k = 0; k <= kSplineDegree; ++k) {
             const double Nk = br.value[k];
-            ev.H.block(lay.c(0), lay.a(br.first + k), nc, 3) += Nk * rb.Ca.transpose();
-            ev.H.block(lay.c(0), lay.b(br.first + k), nc, 3) += Nk * rb.Cb.transpose();
+            const std::size_t at_a = up.at(lay.a(br.first + k), col), at_b = up.at(lay.b(br.first + k), col);
+            for (int r = 0; r < 3; ++r) {
+              ev.H[at_a + static_cast<std::size_t>(r)] += Nk * rb.Ca(r, q);
+              ev.H[at_b + static_cast<std::size_t>(r)] += Nk * rb.Cb(r, q);
+            }
           }
-          ev.H.block(lay.c(0), lay.c(0), nc, nc) += rb.Hcc;
-          ev.g.segment(lay.c(0), nc) += rb.gc;
+          const std::size_t at_c = up.at(lay.c(0), col);
+          for (int r = 0; r <= q; ++r) ev.H[at_c + static_cast<std::size_t>(r)] += rb.Hcc(r, q);
+          ev.g(col) += rb.gc(q);
         }
       }
     }
@@ -406,18 +440,32 @@ void project_profile(const ProfileBounds& bounds, int nc, VecX* x) {
 
 // Upper-triangular pattern of JᵀJ: control points couple within the cubic support, the
 // profile couples with everything.
-void build_pattern(const Layout& lay, std::vector<int>* col_ptr, std::vector<int>* row_idx) {
+UpperPattern build_pattern(const Layout& lay) {
   const int N = lay.n();
   auto block = [&](int v) { return v < 6 * lay.K ? v / 6 : -1; };
-  col_ptr->assign(1, 0);
-  row_idx->clear();
+  UpperPattern up;
+  up.col_ptr.assign(1, 0);
   for (int col = 0; col < N; ++col) {
     for (int row = 0; row <= col; ++row) {
       const int bc = block(col), br = block(row);
-      if (bc < 0 || br < 0 || std::abs(bc - br) <= kSplineDegree) row_idx->push_back(row);
+      if (bc < 0 || br < 0 || std::abs(bc - br) <= kSplineDegree) up.row_idx.push_back(row);
     }
-    col_ptr->push_back(static_cast<int>(row_idx->size()));
+    up.first.push_back(up.row_idx[static_cast<std::size_t>(up.col_ptr.back())]);
+    up.col_ptr.push_back(static_cast<int>(up.row_idx.size()));
+    assert(up.row_idx.back() == col && col - up.first.back() + 1 == up.col_ptr.back() - up.col_ptr[col]);
   }
+  return up;
+}
+
+// δᵀ H δ for H's upper triangle in the pattern.
+double quadratic_form(const UpperPattern& up, const std::vector<double>& H, const VecX& delta) {
+  double sum = 0.0;
+  for (int col = 0; col + 1 < static_cast<int>(up.col_ptr.size()); ++col)
+    for (int k = up.col_ptr[col]; k < up.col_ptr[col + 1]; ++k) {
+      const int row = up.row_idx[static_cast<std::size_t>(k)];
+      sum += (row == col ? 1.0 : 2.0) * H[static_cast<std::size_t>(k)] * delta(row) * delta(col);
+    }
+  return sum;
 }
 
 }  // namespace
@@ -534,7 +582,7 @@ FitResult fit_motion(const SurfaceIndex& index, const Motion& init_motion,
   const Motion init =
       K == init_motion.count() ? init_motion : init_motion.restricted(0, 1, 0, 1, K);
 
-  Problem pb{index, options, {}, {}, {}, {}, {}, 0, 0, 0, 0, 0, {}, options.fair_iterations > 0};
+  Problem pb{index, options, {}, {}, {}, {}, {}, 0, 0, 0, 0, 0, {}, options.fair_iterations > 0, {}, {}};
   pb.layout.K = K;
   pb.layout.nc = coefficient_count(options.kind);
   pb.knots = init.knots;
@@ -561,7 +609,13 @@ FitResult fit_motion(const SurfaceIndex& index, const Motion& init_motion,
 
   // Fairness (eq. 11): second differences of a and b at consecutive t_i, linear in x.
   const int N = pb.layout.n();
-  pb.H_fair = MatX::Zero(N, N);
+  pb.pattern = build_pattern(pb.layout);
+  pb.Hcc_all = ProfileSquare::Zero(nc, nc);
+  for (int j = 0; j < n; ++j) {
+    const auto Pj = pb.P.row(j);
+    pb.Hcc_all.noalias() += (pb.W1 + pb.W3) * Pj.transpose() * Pj;  // as assemble() sums it
+  }
+  MatX H_fair = MatX::Zero(N, N);
   for (int i = 1; i + 1 < m; ++i) {
     std::vector<std::pair<int, double>> coef;  // control point → weight
     const double w[3] = {1.0, -2.0, 1.0};
@@ -572,10 +626,14 @@ FitResult fit_motion(const SurfaceIndex& index, const Motion& init_motion,
     for (auto [k, ck] : coef)
       for (auto [l, cl] : coef)
         for (int e = 0; e < 3; ++e) {
-          pb.H_fair(pb.layout.a(k) + e, pb.layout.a(l) + e) += pb.W2 * ck * cl;
-          pb.H_fair(pb.layout.b(k) + e, pb.layout.b(l) + e) += pb.W2 * ck * cl;
+          H_fair(pb.layout.a(k) + e, pb.layout.a(l) + e) += pb.W2 * ck * cl;
+          H_fair(pb.layout.b(k) + e, pb.layout.b(l) + e) += pb.W2 * ck * cl;
         }
   }
+  pb.H_fair.resize(pb.pattern.size());
+  for (int col = 0; col < N; ++col)
+    for (int k = pb.pattern.col_ptr[col]; k < pb.pattern.col_ptr[col + 1]; ++k)
+      pb.H_fair[static_cast<std::size_t>(k)] = H_fair(pb.pattern.row_idx[static_cast<std::size_t>(k)], col);
 
   VecX x(N);
   for (int k = 0; k < K; ++k) {
@@ -619,11 +677,10 @@ FitResult fit_motion(const SurfaceIndex& index, const Motion& init_motion,
   const ProfileBounds bounds = profile_bounds(options.kind, pb.L, options);
   project_profile(bounds, nc, &x);
 
-  std::vector<int> col_ptr, row_idx;
-  build_pattern(pb.layout, &col_ptr, &row_idx);
+  const UpperPattern& up = pb.pattern;
   SparseCholesky chol;
   auto t0 = Clock::now();
-  if (chol.analyze(N, col_ptr, row_idx) != SparseCholesky::Status::ok) {
+  if (chol.analyze(N, up.col_ptr, up.row_idx) != SparseCholesky::Status::ok) {
     result.status = FitStatus::not_positive_definite;
     return result;
   }
@@ -635,7 +692,7 @@ FitResult fit_motion(const SurfaceIndex& index, const Motion& init_motion,
   double lambda = kInitialDamping;
   int iter = 0;
   bool converged = false;
-  std::vector<double> values(row_idx.size());
+  std::vector<double> values(up.size());
   const auto solve = [&chol](const VecX& rhs, VecX* out) {
     return chol.solve(rhs, out) == SparseCholesky::Status::ok;
   };
@@ -648,19 +705,20 @@ FitResult fit_motion(const SurfaceIndex& index, const Motion& init_motion,
       break;
     }
     if (iter == options.fair_iterations && pb.fair_active) {
-      ev.H -= pb.H_fair;
+      for (std::size_t k = 0; k < up.size(); ++k) ev.H[k] -= pb.H_fair[k];
       pb.fair_active = false;
     }
-    const double diag_floor = 1e-12 * ev.H.diagonal().maxCoeff();
+    double diag_max = -std::numeric_limits<double>::infinity();
+    for (int col = 0; col < N; ++col) diag_max = std::max(diag_max, ev.H[up.diagonal(col)]);
+    const double diag_floor = 1e-12 * diag_max;
     bool accepted = false;
     while (!accepted && lambda < 1e12) {
       t0 = Clock::now();
-      for (int col = 0; col < N; ++col)
-        for (int k = col_ptr[col]; k < col_ptr[col + 1]; ++k) {
-          const int row = row_idx[k];
-          values[k] = ev.H(row, col);
-          if (row == col) values[k] += lambda * (ev.H(col, col) + diag_floor) + diag_floor;
-        }
+      values = ev.H;
+      for (int col = 0; col < N; ++col) {
+        const std::size_t k = up.diagonal(col);
+        values[k] += lambda * (ev.H[k] + diag_floor) + diag_floor;
+      }
       VecX delta;
       const auto fs = chol.factorize(values);
       bool solved = fs == SparseCholesky::Status::ok && solve(-ev.g, &delta);
@@ -698,7 +756,7 @@ FitResult fit_motion(const SurfaceIndex& index, const Motion& init_motion,
         char line[256];
         std::snprintf(line, sizeof line,
                       "iter %d lambda %.3g cost %.6g -> %.6g (fair %.3g) interior %d |step| %.3g active %d%s",
-                      iter, lambda, ev.cost, trial.cost, delta.dot(pb.H_fair * delta), trial.interior,
+                      iter, lambda, ev.cost, trial.cost, quadratic_form(up, pb.H_fair, delta), trial.interior,
                       delta.head(6 * K).cwiseAbs().maxCoeff(), active, cut_short ? " (cut short)" : "");
         options.trace(line);
       }
