@@ -21,7 +21,8 @@ class SparseCholesky {
   SparseCholesky& operator=(const SparseCholesky&) = delete;
 
   // Upper triangle in compressed columns: col_ptr has n+1 entries, row_idx the sorted rows
-  // (≤ column) of every column. Keeps the pattern and computes the fill-reducing ordering.
+  // (≤ column) of every column, each column's rows without gaps up to the diagonal (an
+  // envelope: its factor fills in nothing outside it, so the given order is kept).
   Status analyze(int n, std::vector<int> col_ptr, std::vector<int> row_idx);
   // Values in the pattern's order.
   Status factorize(const std::vector<double>& values);
