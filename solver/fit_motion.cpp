@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <limits>
 #include <numeric>
+#include <span>
 #include <sstream>
 #include <vector>
 
@@ -109,6 +110,16 @@ struct UpperPattern {
   std::size_t diagonal(int col) const { return static_cast<std::size_t>(col_ptr[col + 1] - 1); }
 };
 
+// Per-t_i contribution to JᵀJ and Jᵀr in local coordinates [A_f..A_f+3, B_f..B_f+3] (24)
+// and the profile (nc).
+struct RowBlock {
+  Eigen::Matrix3d Maa, Mab, Mbb;
+  ProfileRow3 Ca, Cb;  // 3 by nc
+  ProfileSquare Hcc;   // nc by nc
+  Vec3 ga, gb;
+  ProfileVec gc;
+};
+
 struct Problem {
   const SurfaceIndex& index;
   const FitOptions& options;
@@ -125,6 +136,7 @@ struct Problem {
   // Σ_j (W1 + W3) P_jᵀ P_j over all s_j, summed as a row's own loop sums it: the profile block
   // of every row whose samples all lie inside Φ (most rows), bit for bit.
   ProfileSquare Hcc_all;
+  std::vector<RowBlock> blocks;  // assemble()'s, kept from one assembly to the next
 
   int m() const { return options.samples_t; }
   int n() const { return options.samples_s; }
@@ -157,15 +169,6 @@ void unpack(const Layout& lay, const VecX& x, Points* A, Points* B, VecX* c) {
   *c = x.tail(lay.nc);
 }
 
-// Per-t_i contribution to JᵀJ and Jᵀr in local coordinates [A_f..A_f+3, B_f..B_f+3] (24)
-// and the profile (nc).
-struct RowBlock {
-  Eigen::Matrix3d Maa, Mab, Mbb;
-  ProfileRow3 Ca, Cb;  // 3 by nc
-  ProfileSquare Hcc;   // nc by nc
-  Vec3 ga, gb;
-  ProfileVec gc;
-};
 
 // Sample (p, its footpoint f, sphere radius d)'s residuals: ρ = ⟨p − p⊥, n⟩ − d (F_plane) and
 // q = p − (p⊥ + d n) (F_point).
@@ -177,59 +180,66 @@ Residual residual(const Vec3& p, const ClosestPoint& f, double d) {
   return {f.direction.dot(p - f.point) - d, p - f.point - d * f.direction};
 }
 
-Evaluation evaluate(Problem& pb, const VecX& x, std::vector<int>& hints, FitTiming& timing) {
+// `reuse`: an evaluation the fit is done with, whose buffers (the footpoints alone are 216 KB
+// at the default sampling) are written again in place rather than allocated afresh.
+Evaluation evaluate(Problem& pb, const VecX& x, std::vector<int>& hints, FitTiming& timing,
+                    Evaluation reuse = {}) {
   const Layout& lay = pb.layout;
   const int m = pb.m(), n = pb.n();
   assert(lay.nc <= kSplineProfileCoefficients);
   Points A, B;
   VecX c;
   unpack(lay, x, &A, &B, &c);
-  Evaluation ev;
+  Evaluation ev = std::move(reuse);
+  ev.cost = 0.0, ev.interior = 0, ev.assembled = false;
   ev.d = pb.P * c;
   const VecX& d = ev.d;
 
-  auto t0 = Clock::now();
+  // Row by row in one parallel pass: the axis at t_i, its samples, their closest points (from
+  // the hints, the footpoint faces of the iterate before) and the row's cost. The passes were
+  // three (the samples serially, the batch of queries, the cost), and between them the
+  // second thread idled. The time counts as queries: the cost adds about 1% to it.
+  const auto t0 = Clock::now();
   ev.a_i.resize(static_cast<std::size_t>(m)), ev.b_i.resize(static_cast<std::size_t>(m));
   ev.q.resize(static_cast<Eigen::Index>(m) * n, 3);
-  for (int i = 0; i < m; ++i) {
-    const BasisRow& r = pb.rows[i];
-    Vec3 ai = Vec3::Zero(), bi = Vec3::Zero();
-    for (int k = 0; k <= kSplineDegree; ++k) {
-      ai += r.value[k] * A.row(r.first + k).transpose();
-      bi += r.value[k] * B.row(r.first + k).transpose();
-    }
-    ev.a_i[i] = ai, ev.b_i[i] = bi;
-    for (int j = 0; j < n; ++j) ev.q.row(i * n + j) = ((1.0 - pb.s[j]) * ai + pb.s[j] * bi).transpose();
-  }
-  ev.cp = pb.index.closest_points(ev.q, hints);
-  for (std::size_t k = 0; k < ev.cp.size(); ++k) hints[k] = ev.cp[k].face;
-  timing.query_s += seconds_since(t0);
-  timing.queries += static_cast<long long>(ev.cp.size());
-
-  // The cost, row by row, summed in row order.
-  t0 = Clock::now();
+  ev.cp.resize(static_cast<std::size_t>(m) * n);
   std::vector<double> row_cost(static_cast<std::size_t>(m));
   std::vector<int> row_interior(static_cast<std::size_t>(m));
   parallel_for(0, static_cast<std::size_t>(m), [&](std::size_t begin, std::size_t end) {
     for (std::size_t ii = begin; ii < end; ++ii) {
       const int i = static_cast<int>(ii);
+      const BasisRow& br = pb.rows[ii];
+      Vec3 ai = Vec3::Zero(), bi = Vec3::Zero();
+      for (int k = 0; k <= kSplineDegree; ++k) {
+        ai += br.value[k] * A.row(br.first + k).transpose();
+        bi += br.value[k] * B.row(br.first + k).transpose();
+      }
+      ev.a_i[ii] = ai, ev.b_i[ii] = bi;
+      for (int j = 0; j < n; ++j) ev.q.row(i * n + j) = ((1.0 - pb.s[j]) * ai + pb.s[j] * bi).transpose();
+      const std::size_t first = ii * static_cast<std::size_t>(n);
+      const std::span<ClosestPoint> row_cp(ev.cp.data() + first, static_cast<std::size_t>(n));
+      pb.index.closest_points_serial(ev.q.middleRows(i * n, n),
+                                     std::span<const int>(hints.data() + first, static_cast<std::size_t>(n)), row_cp);
       double cost = 0.0;
       int interior = 0;
       for (int j = 0; j < n; ++j) {
-        const ClosestPoint& f = ev.cp[static_cast<std::size_t>(i * n + j)];
+        const ClosestPoint& f = row_cp[static_cast<std::size_t>(j)];
+        hints[first + static_cast<std::size_t>(j)] = f.face;
         if (f.boundary || f.face < 0) continue;  // beyond Φ: no proximity information
         ++interior;
         const Residual r = residual(ev.q.row(i * n + j).transpose(), f, d(j));
         cost += pb.W1 * r.rho * r.rho + pb.W3 * r.q.squaredNorm();
       }
       // Rigidity (eq. 9) as a soft constraint at t_i.
-      const double r = (ev.a_i[ii] - ev.b_i[ii]).squaredNorm() - pb.L * pb.L;
+      const double r = (ai - bi).squaredNorm() - pb.L * pb.L;
       cost += pb.W4 * r * r;
       row_cost[ii] = cost, row_interior[ii] = interior;
     }
-  }, 4);
+  }, 1);  // rows differ in cost (their queries, samples beyond Φ): small chunks balance them
+  // The cost summed in row order.
   for (int i = 0; i < m; ++i) ev.cost += row_cost[static_cast<std::size_t>(i)], ev.interior += row_interior[static_cast<std::size_t>(i)];
-  timing.assembly_s += seconds_since(t0);
+  timing.query_s += seconds_since(t0);
+  timing.queries += static_cast<long long>(ev.cp.size());
   return ev;
 }
 
@@ -240,7 +250,8 @@ void assemble(Problem& pb, Evaluation& ev, FitTiming& timing) {
   const int m = pb.m(), n = pb.n(), nc = lay.nc;
   const VecX& d = ev.d;
   const auto t0 = Clock::now();
-  std::vector<RowBlock> blocks(static_cast<std::size_t>(m));
+  std::vector<RowBlock>& blocks = pb.blocks;
+  blocks.resize(static_cast<std::size_t>(m));  // every block is written in full below
   parallel_for(0, static_cast<std::size_t>(m), [&](std::size_t begin, std::size_t end) {
     for (std::size_t ii = begin; ii < end; ++ii) {
       const int i = static_cast<int>(ii);
@@ -288,8 +299,9 @@ void assemble(Problem& pb, Evaluation& ev, FitTiming& timing) {
   const int N = lay.n();
   const UpperPattern& up = pb.pattern;
   // Fairness acts on the update δ (W2 |D δ|², see FitOptions): it adds to JᵀJ only.
-  ev.H = pb.fair_active ? pb.H_fair : std::vector<double>(up.size(), 0.0);
-  ev.g = VecX::Zero(N);
+  if (pb.fair_active) ev.H = pb.H_fair;
+  else ev.H.assign(up.size(), 0.0);
+  ev.g.setZero(N);
   // H(r0 + r, c0 + c) += w B(r, c) for the block's entries on or above the diagonal.
   const auto add_block = [&](int r0, int c0, double w, const Eigen::Matrix3d& B) {
     for (int c = 0; c < 3; ++c) {
@@ -582,7 +594,7 @@ FitResult fit_motion(const SurfaceIndex& index, const Motion& init_motion,
   const Motion init =
       K == init_motion.count() ? init_motion : init_motion.restricted(0, 1, 0, 1, K);
 
-  Problem pb{index, options, {}, {}, {}, {}, {}, 0, 0, 0, 0, 0, {}, options.fair_iterations > 0, {}, {}};
+  Problem pb{index, options, {}, {}, {}, {}, {}, 0, 0, 0, 0, 0, {}, options.fair_iterations > 0, {}, {}, {}};
   pb.layout.K = K;
   pb.layout.nc = coefficient_count(options.kind);
   pb.knots = init.knots;
@@ -687,6 +699,8 @@ FitResult fit_motion(const SurfaceIndex& index, const Motion& init_motion,
   result.timing.factor_s += seconds_since(t0);
 
   Evaluation ev = evaluate(pb, x, hints, result.timing);
+  Evaluation spare;                // the buffers of an evaluation the fit is done with
+  std::vector<int> trial_hints;
   assemble(pb, ev, result.timing);
   result.initial_cost = ev.cost;
   double lambda = kInitialDamping;
@@ -750,8 +764,8 @@ FitResult fit_motion(const SurfaceIndex& index, const Motion& init_motion,
       }
       VecX x_new = x + delta;
       project_profile(bounds, nc, &x_new);  // violations below the tolerance, or rounding
-      std::vector<int> trial_hints = hints;
-      Evaluation trial = evaluate(pb, x_new, trial_hints, result.timing);
+      trial_hints = hints;
+      Evaluation trial = evaluate(pb, x_new, trial_hints, result.timing, std::move(spare));
       if (options.trace) {
         char line[256];
         std::snprintf(line, sizeof line,
@@ -770,7 +784,7 @@ FitResult fit_motion(const SurfaceIndex& index, const Motion& init_motion,
         hints.swap(trial_hints);
         const double step = delta.head(6 * K).cwiseAbs().maxCoeff();
         converged = decrease <= 1e-10 * ev.cost || step <= 1e-9 * scale || trial.cost < 1e-30;
-        ev = std::move(trial);
+        std::swap(ev, trial);
         lambda = std::max(lambda / kDampingShrink, kMinDamping);
         accepted = true;
         // Near the optimum the footpoints slide with the axis and successive GN steps line up
@@ -789,14 +803,16 @@ FitResult fit_motion(const SurfaceIndex& index, const Motion& init_motion,
             if (a < kExtendBeyond || (a == 2.0 && alpha <= 2.0)) break;
             VecX x_far = x_before + a * delta;
             project_profile(bounds, nc, &x_far);
-            std::vector<int> far_hints = hints;
-            Evaluation far = evaluate(pb, x_far, far_hints, result.timing);
-            if (far.cost < ev.cost && far.interior >= std::max(nc, n)) {
+            trial_hints = hints;
+            Evaluation far = evaluate(pb, x_far, trial_hints, result.timing, std::move(trial));
+            const bool further = far.cost < ev.cost && far.interior >= std::max(nc, n);
+            if (further) {
               x = x_far;
-              hints.swap(far_hints);
-              ev = std::move(far);
-              break;
+              hints.swap(trial_hints);
+              std::swap(ev, far);
             }
+            trial = std::move(far);  // the evaluation left over
+            if (further) break;
           }
         }
         // The iterate moved to: its JᵀJ and Jᵀr are the next step's.
@@ -804,6 +820,7 @@ FitResult fit_motion(const SurfaceIndex& index, const Motion& init_motion,
       } else {
         lambda *= kDampingGrowth;
       }
+      spare = std::move(trial);
     }
     if (!accepted) {  // no step decreases the cost any more: a (local) minimum
       converged = true;
