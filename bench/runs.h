@@ -58,7 +58,8 @@ inline void run_decompose(benchmark::State& state, const Mesh& mesh, double tole
 }
 
 // fit_motion from `start`. Counters: GN iterations, samples per iteration, closest-point
-// queries made, and the shares of the fit's time in queries, assembly and CHOLMOD.
+// queries made, the shares of the fit's time in queries, assembly and CHOLMOD, the
+// factorisations per fit and the share of them made ahead on a second thread.
 inline void run_fit(benchmark::State& state, const SurfaceIndex& index, const Motion& start,
                     const FitOptions& options) {
   FitTiming sum;
@@ -71,6 +72,8 @@ inline void run_fit(benchmark::State& state, const SurfaceIndex& index, const Mo
     sum.factor_s += result.timing.factor_s;
     sum.total_s += result.timing.total_s;
     sum.queries += result.timing.queries;
+    sum.factorisations += result.timing.factorisations;
+    sum.made_ahead += result.timing.made_ahead;
     iterations += result.iterations;
   }
   const double n = static_cast<double>(state.iterations());
@@ -81,6 +84,8 @@ inline void run_fit(benchmark::State& state, const SurfaceIndex& index, const Mo
   state.counters["query_share"] = sum.query_s / sum.total_s;
   state.counters["assembly_share"] = sum.assembly_s / sum.total_s;
   state.counters["factor_share"] = sum.factor_s / sum.total_s;
+  state.counters["factorisations"] = static_cast<double>(sum.factorisations) / n;
+  state.counters["made_ahead"] = static_cast<double>(sum.made_ahead) / std::max(1, sum.factorisations);
   state.counters["ms_per_iteration"] = 1e3 * sum.total_s / std::max(1.0, static_cast<double>(iterations));
 }
 

@@ -9,6 +9,8 @@
 #include <thread>
 #include <vector>
 #else
+#include <atomic>
+
 #include <tbb/blocked_range.h>
 #include <tbb/global_control.h>
 #include <tbb/parallel_for.h>
@@ -88,6 +90,36 @@ void run_beside(const std::function<void()>& beside, const std::function<void()>
   if (failed) std::rethrow_exception(failed);
 }
 
+bool run_if_idle(const std::function<void()>& maybe, const std::function<void()>& here) {
+  if (max_threads() < 2) {
+    here();
+    return false;
+  }
+  std::atomic<int> state{0};  // 0 offered, 1 taken up, 2 withdrawn
+  std::exception_ptr failed;
+  std::thread other([&] {
+    int offered = 0;
+    if (!state.compare_exchange_strong(offered, 1)) return;
+    try {
+      maybe();
+    } catch (...) {
+      failed = std::current_exception();
+    }
+  });
+  int offered = 0;
+  try {
+    here();
+  } catch (...) {
+    state.compare_exchange_strong(offered, 2);
+    other.join();
+    throw;
+  }
+  const bool ran = !state.compare_exchange_strong(offered, 2);
+  other.join();
+  if (failed) std::rethrow_exception(failed);
+  return ran;
+}
+
 struct ThreadLimit::Impl {
   int previous = 0;
 };
@@ -139,6 +171,33 @@ void run_beside(const std::function<void()>& beside, const std::function<void()>
     throw;
   }
   group.wait();  // rethrows what `beside` threw
+}
+
+bool run_if_idle(const std::function<void()>& maybe, const std::function<void()>& here) {
+  if (max_threads() < 2) {
+    here();
+    return false;
+  }
+  std::atomic<int> state{0};  // 0 offered, 1 taken up, 2 withdrawn
+  tbb::task_group group;
+  group.run([&] {
+    int offered = 0;
+    if (state.compare_exchange_strong(offered, 1)) maybe();
+  });
+  int offered = 0;
+  try {
+    here();
+  } catch (...) {
+    state.compare_exchange_strong(offered, 2);
+    try {
+      group.wait();
+    } catch (...) {  // what `here` threw is the one reported
+    }
+    throw;
+  }
+  const bool ran = !state.compare_exchange_strong(offered, 2);
+  group.wait();  // runs the withdrawn offer here, which then returns at once; rethrows `maybe`'s
+  return ran;
 }
 
 void parallel_invoke_each(std::size_t count, const std::function<void(std::size_t)>& task) {

@@ -28,6 +28,13 @@ void parallel_invoke_each(std::size_t count, const std::function<void(std::size_
 // next build faults those pages in again.
 void run_beside(const std::function<void()>& beside, const std::function<void()>& here);
 
+// Runs `here` on the calling thread and offers `maybe` to another: `maybe` runs only if a
+// thread that is free starts it while `here` runs, never after `here` (on one thread, never).
+// Returns whether it ran; an exception from either reaches the caller after both are done.
+// For work that the next step needs only perhaps: done on a thread that would idle, at no
+// cost to the calling thread, and skipped when none is free.
+bool run_if_idle(const std::function<void()>& maybe, const std::function<void()>& here);
+
 // A key and the index it belongs to, ordered by both. Trivial: a buffer of them costs no
 // writes until a parallel loop fills it (see Buffer).
 struct KeyedIndex {

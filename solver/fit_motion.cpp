@@ -690,12 +690,17 @@ FitResult fit_motion(const SurfaceIndex& index, const Motion& init_motion,
   project_profile(bounds, nc, &x);
 
   const UpperPattern& up = pb.pattern;
-  SparseCholesky chol;
+  // Two factorisations: the one this step is solved with, and the next damping's, made ahead
+  // on a second thread when one is free (see the loop below).
+  SparseCholesky factors[2];
+  int current = 0;
+  const bool look_ahead = max_threads() > 1;
   auto t0 = Clock::now();
-  if (chol.analyze(N, up.col_ptr, up.row_idx) != SparseCholesky::Status::ok) {
-    result.status = FitStatus::not_positive_definite;
-    return result;
-  }
+  for (int f = 0; f < (look_ahead ? 2 : 1); ++f)
+    if (factors[f].analyze(N, up.col_ptr, up.row_idx) != SparseCholesky::Status::ok) {
+      result.status = FitStatus::not_positive_definite;
+      return result;
+    }
   result.timing.factor_s += seconds_since(t0);
 
   Evaluation ev = evaluate(pb, x, hints, result.timing);
@@ -706,10 +711,16 @@ FitResult fit_motion(const SurfaceIndex& index, const Motion& init_motion,
   double lambda = kInitialDamping;
   int iter = 0;
   bool converged = false;
-  std::vector<double> values(up.size());
-  const auto solve = [&chol](const VecX& rhs, VecX* out) {
-    return chol.solve(rhs, out) == SparseCholesky::Status::ok;
+  std::vector<double> values(up.size()), values_ahead;
+  const auto solve = [&](const VecX& rhs, VecX* out) {
+    return factors[current].solve(rhs, out) == SparseCholesky::Status::ok;
   };
+  // The factorisation of JᵀJ + damping made ahead, for this iterate's JᵀJ.
+  struct Ahead {
+    bool ready = false;
+    double lambda = 0.0;
+    SparseCholesky::Status status = SparseCholesky::Status::failed;
+  } ahead;
   // A = [0 | G]: the constraints act on c only.
   MatX A_bounds = MatX::Zero(bounds.G.rows(), N);
   A_bounds.rightCols(nc) = bounds.G;
@@ -725,16 +736,50 @@ FitResult fit_motion(const SurfaceIndex& index, const Motion& init_motion,
     double diag_max = -std::numeric_limits<double>::infinity();
     for (int col = 0; col < N; ++col) diag_max = std::max(diag_max, ev.H[up.diagonal(col)]);
     const double diag_floor = 1e-12 * diag_max;
+    // JᵀJ + damping, in the pattern.
+    const auto damped = [&](double damping, std::vector<double>* out) {
+      *out = ev.H;
+      for (int col = 0; col < N; ++col) {
+        const std::size_t k = up.diagonal(col);
+        (*out)[k] += damping * (ev.H[k] + diag_floor) + diag_floor;
+      }
+    };
+    ahead.ready = false;  // a new iterate, or the fairness gone: another JᵀJ
     bool accepted = false;
     while (!accepted && lambda < 1e12) {
       t0 = Clock::now();
-      values = ev.H;
-      for (int col = 0; col < N; ++col) {
-        const std::size_t k = up.diagonal(col);
-        values[k] += lambda * (ev.H[k] + diag_floor) + diag_floor;
-      }
       VecX delta;
-      const auto fs = chol.factorize(values);
+      SparseCholesky::Status fs = SparseCholesky::Status::failed;
+      ++result.timing.factorisations;
+      if (ahead.ready && ahead.lambda == lambda) {
+        current = 1 - current;
+        fs = ahead.status;
+        ahead.ready = false;
+        ++result.timing.made_ahead;
+      } else if (look_ahead) {
+        // A third to a half of a fit's factorisations are retries of a rejected step, with
+        // kDampingGrowth times the damping on the same JᵀJ: a second thread that is free
+        // factors that one meanwhile, into the other factorisation. It is the very
+        // factorisation the retry would make, so the fit takes the same steps whether it was
+        // made ahead or not. A thread that is busy (fits run side by side in decompose) is
+        // not waited for: the offer is withdrawn when this factorisation is done.
+        const double next = lambda * kDampingGrowth;
+        SparseCholesky::Status next_status = SparseCholesky::Status::failed;
+        SparseCholesky& other = factors[1 - current];
+        const bool made = run_if_idle(
+            [&] {
+              damped(next, &values_ahead);
+              next_status = other.factorize(values_ahead);
+            },
+            [&] {
+              damped(lambda, &values);
+              fs = factors[current].factorize(values);
+            });
+        ahead = {made, next, next_status};
+      } else {
+        damped(lambda, &values);
+        fs = factors[current].factorize(values);
+      }
       bool solved = fs == SparseCholesky::Status::ok && solve(-ev.g, &delta);
       // The damped Gauss–Newton model under the cutter constraints, solved exactly: only when
       // the free step leaves them, so an unconstrained fit takes the very same steps.

@@ -88,6 +88,8 @@ struct FitTiming {
   double factor_s = 0.0;    // CHOLMOD analyse, factorise, solve
   double total_s = 0.0;
   long long queries = 0;     // closest-point queries made
+  int factorisations = 0;    // numeric factorisations a step was solved with
+  int made_ahead = 0;        // of them, made on a second thread before they were needed
 };
 
 struct FitResult {

@@ -3,6 +3,8 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <atomic>
+#include <chrono>
 #include <cstdint>
 #include <random>
 #include <stdexcept>
@@ -75,6 +77,56 @@ TEST(Parallel, RunBesideRunsHereOnTheCallingThreadAndBothToTheEnd) {
     }
     EXPECT_TRUE(finished) << "beside ran to its end before the exception left";
   }
+}
+
+// run_if_idle: on one thread `maybe` never runs. On two, a free thread takes it up while
+// `here` waits for it, and the call says so; an offer nobody took before `here` ended is
+// withdrawn, and never runs after it. What `maybe` throws reaches the caller.
+TEST(Parallel, RunIfIdleRunsTheOfferOnlyBesideHere) {
+  {
+    const ThreadLimit limit(1);
+    bool maybe_ran = false, here_ran = false;
+    EXPECT_FALSE(run_if_idle([&] { maybe_ran = true; }, [&] { here_ran = true; }));
+    EXPECT_TRUE(here_ran);
+    EXPECT_FALSE(maybe_ran);
+  }
+  const ThreadLimit limit(2);
+  std::atomic<bool> started{false};
+  std::thread::id maybe_on;
+  const auto wait_for_start = [&] {
+    const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+    while (!started && std::chrono::steady_clock::now() < until) std::this_thread::yield();
+  };
+  const bool ran = run_if_idle(
+      [&] {
+        maybe_on = std::this_thread::get_id();
+        started = true;
+      },
+      wait_for_start);
+  EXPECT_TRUE(ran);
+  EXPECT_TRUE(started);
+  EXPECT_NE(maybe_on, std::this_thread::get_id());
+
+  // Offered many times while `here` is quick: whenever the call says it did not run, it did
+  // not run later either (checked once every call has returned).
+  int said_ran = 0, did_run = 0;
+  for (int k = 0; k < 200; ++k) {
+    std::atomic<bool> this_ran{false};
+    const bool r = run_if_idle([&] { this_ran = true; }, [] {});
+    EXPECT_EQ(r, this_ran.load()) << "offer " << k;
+    said_ran += r;
+    did_run += this_ran.load();
+  }
+  EXPECT_EQ(said_ran, did_run);
+
+  started = false;
+  EXPECT_THROW(run_if_idle(
+                   [&] {
+                     started = true;
+                     throw std::runtime_error("maybe");
+                   },
+                   wait_for_start),
+               std::runtime_error);
 }
 
 }  // namespace
