@@ -21,6 +21,13 @@
 
 namespace flank {
 
+namespace {
+std::atomic<int> g_offers_always_taken{0};  // OffersAlwaysTaken alive
+}  // namespace
+
+OffersAlwaysTaken::OffersAlwaysTaken() { ++g_offers_always_taken; }
+OffersAlwaysTaken::~OffersAlwaysTaken() { --g_offers_always_taken; }
+
 #ifdef FLANK_TSAN_THREADS
 // The ThreadSanitizer build (scripts/test --tsan) runs the same chunks on plain std::threads.
 // oneTBB's scheduler lives in libtbb, which is not instrumented: TSan cannot see the
@@ -94,6 +101,11 @@ bool run_if_idle(const std::function<void()>& maybe, const std::function<void()>
   if (max_threads() < 2) {
     here();
     return false;
+  }
+  if (g_offers_always_taken > 0) {
+    maybe();
+    here();
+    return true;
   }
   std::atomic<int> state{0};  // 0 offered, 1 taken up, 2 withdrawn
   std::exception_ptr failed;
@@ -177,6 +189,11 @@ bool run_if_idle(const std::function<void()>& maybe, const std::function<void()>
   if (max_threads() < 2) {
     here();
     return false;
+  }
+  if (g_offers_always_taken > 0) {
+    maybe();
+    here();
+    return true;
   }
   std::atomic<int> state{0};  // 0 offered, 1 taken up, 2 withdrawn
   tbb::task_group group;

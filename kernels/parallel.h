@@ -35,6 +35,18 @@ void run_beside(const std::function<void()>& beside, const std::function<void()>
 // cost to the calling thread, and skipped when none is free.
 bool run_if_idle(const std::function<void()>& maybe, const std::function<void()>& here);
 
+// For tests: while one lives, run_if_idle takes every offer as if a free thread always did:
+// with max_threads() >= 2 it runs `maybe` on the calling thread, then `here`, and returns
+// true. Whether another thread is free in time depends on the machine's load, so the paths
+// that use what was made ahead are tested with this, deterministically.
+class OffersAlwaysTaken {
+ public:
+  OffersAlwaysTaken();
+  ~OffersAlwaysTaken();
+  OffersAlwaysTaken(const OffersAlwaysTaken&) = delete;
+  OffersAlwaysTaken& operator=(const OffersAlwaysTaken&) = delete;
+};
+
 // A key and the index it belongs to, ordered by both. Trivial: a buffer of them costs no
 // writes until a parallel loop fills it (see Buffer).
 struct KeyedIndex {

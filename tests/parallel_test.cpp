@@ -119,6 +119,16 @@ TEST(Parallel, RunIfIdleRunsTheOfferOnlyBesideHere) {
   }
   EXPECT_EQ(said_ran, did_run);
 
+  {  // forced, for tests of the code that uses the offers: taken on the caller, first
+    const OffersAlwaysTaken taken;
+    std::vector<int> order;
+    EXPECT_TRUE(run_if_idle([&] { order.push_back(1); }, [&] { order.push_back(2); }));
+    EXPECT_EQ(order, (std::vector<int>{1, 2}));
+    const ThreadLimit one(1);
+    EXPECT_FALSE(run_if_idle([&] { order.push_back(3); }, [] {}));
+    EXPECT_EQ(order.size(), 2u);
+  }
+
   started = false;
   EXPECT_THROW(run_if_idle(
                    [&] {
