@@ -19,10 +19,27 @@
 #include <tbb/task_group.h>
 #endif
 
+#include <optional>
+
 namespace flank {
 
 namespace {
 std::atomic<int> g_offers_always_taken{0};  // OffersAlwaysTaken alive
+
+// run_if_idle where nothing is offered: on one thread (`maybe` never runs), or with every
+// offer taken (OffersAlwaysTaken). Whether `maybe` ran, or nothing when an offer is to be made.
+std::optional<bool> run_without_offer(const std::function<void()>& maybe, const std::function<void()>& here) {
+  if (max_threads() < 2) {
+    here();
+    return false;
+  }
+  if (g_offers_always_taken > 0) {
+    maybe();
+    here();
+    return true;
+  }
+  return std::nullopt;
+}
 }  // namespace
 
 OffersAlwaysTaken::OffersAlwaysTaken() { ++g_offers_always_taken; }
@@ -98,15 +115,7 @@ void run_beside(const std::function<void()>& beside, const std::function<void()>
 }
 
 bool run_if_idle(const std::function<void()>& maybe, const std::function<void()>& here) {
-  if (max_threads() < 2) {
-    here();
-    return false;
-  }
-  if (g_offers_always_taken > 0) {
-    maybe();
-    here();
-    return true;
-  }
+  if (const std::optional<bool> ran = run_without_offer(maybe, here)) return *ran;
   std::atomic<int> state{0};  // 0 offered, 1 taken up, 2 withdrawn
   std::exception_ptr failed;
   std::thread other([&] {
@@ -186,15 +195,7 @@ void run_beside(const std::function<void()>& beside, const std::function<void()>
 }
 
 bool run_if_idle(const std::function<void()>& maybe, const std::function<void()>& here) {
-  if (max_threads() < 2) {
-    here();
-    return false;
-  }
-  if (g_offers_always_taken > 0) {
-    maybe();
-    here();
-    return true;
-  }
+  if (const std::optional<bool> ran = run_without_offer(maybe, here)) return *ran;
   std::atomic<int> state{0};  // 0 offered, 1 taken up, 2 withdrawn
   tbb::task_group group;
   group.run([&] {
