@@ -1,8 +1,11 @@
 #include "kernels/mesh.h"
 
 #include <algorithm>
+#include <cassert>
 #include <cstdint>
+#include <numeric>
 #include <unordered_map>
+#include <vector>
 
 #include "kernels/parallel.h"
 
@@ -27,7 +30,7 @@ Points face_normals(const Mesh& mesh) {
       const double len = n.norm();
       N.row(f) = len > 0 ? Vec3(n / len) : Vec3::Zero();
     }
-  }, 4096);
+  }, 1024);
   return N;
 }
 
@@ -49,6 +52,50 @@ VecX vertex_areas(const Mesh& mesh) {
 }
 
 double total_area(const Mesh& mesh) { return face_areas(mesh).sum(); }
+
+// Not a comparison sort: the slots are counted into buckets by their edge's lower vertex in
+// slot order (so each bucket holds its slots in slot order), then each bucket, a vertex's
+// few edges, is sorted by the higher vertex. The order is total, so this is exactly the
+// order std::sort gives, in time linear in the slots.
+void fill_sorted_edge_slots(const Mesh& mesh, std::span<KeyedIndex> edges) {
+  const int nf = mesh.face_count();
+  const auto nv = static_cast<std::size_t>(mesh.vertex_count());
+  assert(edges.size() == static_cast<std::size_t>(nf) * 3);
+  const auto key_of = [&](int f, int k) {
+    const auto u = static_cast<std::uint32_t>(mesh.F(f, k));
+    const auto v = static_cast<std::uint32_t>(mesh.F(f, (k + 1) % 3));
+    return (std::uint64_t{std::min(u, v)} << 32) | std::max(u, v);
+  };
+  // bucket_end[u + 1] counts the slots whose lower vertex is u, then (summed) ends u's bucket.
+  std::vector<std::int32_t> bucket_end(nv + 1, 0);
+  for (int f = 0; f < nf; ++f)
+    for (int k = 0; k < 3; ++k) ++bucket_end[static_cast<std::size_t>(key_of(f, k) >> 32) + 1];
+  std::partial_sum(bucket_end.begin(), bucket_end.end(), bucket_end.begin());
+  std::vector<std::int32_t> next(bucket_end.begin(), bucket_end.end() - 1);
+  for (int f = 0; f < nf; ++f)
+    for (int k = 0; k < 3; ++k) {
+      const std::uint64_t key = key_of(f, k);
+      edges[static_cast<std::size_t>(next[static_cast<std::size_t>(key >> 32)]++)] = {key, 3 * f + k};
+    }
+  parallel_for(0, nv, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t u = begin; u < end; ++u) {
+      const auto first = edges.begin() + bucket_end[u], last = edges.begin() + bucket_end[u + 1];
+      if (last - first > 16) {
+        std::sort(first, last);
+        continue;
+      }
+      // Insertion: the slots arrive in slot order, so equal keys keep it.
+      for (auto i = first + 1; i < last; ++i)
+        for (auto j = i; j > first && *j < *(j - 1); --j) std::iter_swap(j, j - 1);
+    }
+  }, 4096);
+}
+
+Buffer<KeyedIndex> sorted_edge_slots(const Mesh& mesh) {
+  Buffer<KeyedIndex> edges(static_cast<std::size_t>(mesh.face_count()) * 3);
+  fill_sorted_edge_slots(mesh, edges);
+  return edges;
+}
 
 Mesh subdivide_midpoint(const Mesh& mesh) {
   const int nv = mesh.vertex_count(), nf = mesh.face_count();

@@ -2,6 +2,10 @@
 // everything downstream may assume finite coordinates, indices in range, no degenerate faces.
 #pragma once
 
+#include <cstdint>
+#include <span>
+
+#include "kernels/parallel.h"
 #include "kernels/types.h"
 
 namespace flank {
@@ -31,6 +35,21 @@ VecX face_areas(const Mesh& mesh);
 // #V barycentric vertex areas (a third of each incident face): the area a vertex stands for.
 VecX vertex_areas(const Mesh& mesh);
 double total_area(const Mesh& mesh);
+// A key and the index it belongs to, ordered by both. Trivial: a buffer of them costs no
+// writes until the code that fills it does (see Buffer).
+struct KeyedIndex {
+  std::uint64_t key;
+  std::int32_t index;
+  friend bool operator<(const KeyedIndex& a, const KeyedIndex& b) {
+    return a.key < b.key || (a.key == b.key && a.index < b.index);
+  }
+  friend bool operator==(const KeyedIndex&, const KeyedIndex&) = default;
+};
+// Every edge slot, 3 f + k for edge (k, k + 1 mod 3) of face f, keyed by its vertex pair (the
+// lower vertex in the high 32 bits), sorted by (key, slot): the slots of one edge are
+// adjacent. The order std::sort gives, in time linear in the slots. Into `edges` (3 × #F).
+void fill_sorted_edge_slots(const Mesh& mesh, std::span<KeyedIndex> edges);
+Buffer<KeyedIndex> sorted_edge_slots(const Mesh& mesh);
 // Splits every triangle into four at its edge midpoints (shared edges share the midpoint):
 // 4× the faces on exactly the same surface, orientation kept. Used to re-mesh a part finer
 // for the scaling benchmarks without changing its shape.

@@ -21,7 +21,7 @@ constexpr int kLeafItems = ObbTree::kMaxLeafItems;
 // Subtrees larger than this build their two halves concurrently. Each half writes its nodes
 // straight into its own range of the one node list (a subtree's node count depends on its
 // item count alone), so a split costs a task, not a copy.
-constexpr int kParallelItems = 1024;
+constexpr int kParallelItems = 256;
 
 // What the subtree over n items (median splits down to kLeafItems) holds, for every n the
 // tree meets (two per level), filled before the build and only read during it: its binary
@@ -294,7 +294,7 @@ ObbTree::ObbTree(std::span<const std::array<Vec3, 3>> triangles, double pad) {
       }
       b.moments[f] = m;
     }
-  }, 4096);
+  }, 1024);
   const SubtreeSizes::Counts total = sizes(count);
   nodes_ = Buffer<ObbNode>(static_cast<std::size_t>(total.nodes));
   std::vector<std::pair<double, int>> keys;

@@ -14,7 +14,6 @@
 #include <tbb/blocked_range.h>
 #include <tbb/global_control.h>
 #include <tbb/parallel_for.h>
-#include <tbb/parallel_sort.h>
 #include <tbb/task_arena.h>
 #include <tbb/task_group.h>
 #endif
@@ -79,8 +78,6 @@ void parallel_for(std::size_t begin, std::size_t end,
 void parallel_invoke_each(std::size_t count, const std::function<void(std::size_t)>& task) {
   run_chunks(count, task);
 }
-
-void parallel_sort(std::span<KeyedIndex> items) { std::sort(items.begin(), items.end()); }
 
 void run_beside(const std::function<void()>& beside, const std::function<void()>& here) {
   if (max_threads() < 2) {  // both to the end, as with two threads; `here`'s exception wins
@@ -173,10 +170,6 @@ void parallel_for(std::size_t begin, std::size_t end,
   }
   tbb::parallel_for(tbb::blocked_range<std::size_t>(begin, end, grain),
                     [&](const tbb::blocked_range<std::size_t>& r) { body(r.begin(), r.end()); });
-}
-
-void parallel_sort(std::span<KeyedIndex> items) {
-  tbb::parallel_sort(items.begin(), items.end());
 }
 
 void run_beside(const std::function<void()>& beside, const std::function<void()>& here) {

@@ -47,21 +47,6 @@ class OffersAlwaysTaken {
   OffersAlwaysTaken& operator=(const OffersAlwaysTaken&) = delete;
 };
 
-// A key and the index it belongs to, ordered by both. Trivial: a buffer of them costs no
-// writes until a parallel loop fills it (see Buffer).
-struct KeyedIndex {
-  std::uint64_t key;
-  std::int32_t index;
-  friend bool operator<(const KeyedIndex& a, const KeyedIndex& b) {
-    return a.key < b.key || (a.key == b.key && a.index < b.index);
-  }
-  friend bool operator==(const KeyedIndex&, const KeyedIndex&) = default;
-};
-
-// Sorts ascending by (key, index), concurrently. The order is total, so the result is the one
-// std::sort gives whatever the thread count.
-void parallel_sort(std::span<KeyedIndex> items);
-
 // A fixed number of elements, default-initialised: for elements without a constructor that
 // writes (Eigen vectors, floats), nothing is written until the code that fills them does.
 // A std::vector of n zeroes its memory on the calling thread, so the first touch of every

@@ -265,29 +265,16 @@ Vec3 closest_point_on_triangle(const Vec3& p, const Vec3& a, const Vec3& b, cons
 
 namespace {
 
-// Every edge slot (3 f + k: edge (k, k + 1 mod 3) of face f) keyed by its vertex pair, sorted:
-// the slots of one edge are adjacent.
-// Into `edges` (3 per face).
-void fill_sorted_edge_slots(const Mesh& mesh, std::span<KeyedIndex> edges) {
-  const int nf = mesh.face_count();
-  assert(edges.size() == static_cast<std::size_t>(nf) * 3);
-  parallel_for(0, static_cast<std::size_t>(nf), [&](std::size_t begin, std::size_t end) {
-    for (std::size_t f = begin; f < end; ++f)
-      for (int k = 0; k < 3; ++k) {
-        const auto fi = static_cast<Eigen::Index>(f);
-        const auto u = static_cast<std::uint32_t>(mesh.F(fi, k));
-        const auto v = static_cast<std::uint32_t>(mesh.F(fi, (k + 1) % 3));
-        const std::uint64_t key = (std::uint64_t{std::min(u, v)} << 32) | std::max(u, v);
-        edges[3 * f + static_cast<std::size_t>(k)] = {key, static_cast<std::int32_t>(3 * f) + k};
-      }
-  }, 4096);
-  parallel_sort(edges);
-}
-
-Buffer<KeyedIndex> sorted_edge_slots(const Mesh& mesh) {
-  Buffer<KeyedIndex> edges(static_cast<std::size_t>(mesh.face_count()) * 3);
-  fill_sorted_edge_slots(mesh, edges);
-  return edges;
+// Each face's three corners, contiguous.
+Buffer<Corners> corner_table(const Mesh& mesh) {
+  Buffer<Corners> corners(static_cast<std::size_t>(mesh.face_count()));
+  parallel_for(0, corners.size(), [&](std::size_t begin, std::size_t end) {
+    for (std::size_t f = begin; f < end; ++f) {
+      const auto fi = static_cast<Eigen::Index>(f);
+      corners[f] = {mesh.V.row(mesh.F(fi, 0)), mesh.V.row(mesh.F(fi, 1)), mesh.V.row(mesh.F(fi, 2))};
+    }
+  }, 1024);
+  return corners;
 }
 
 }  // namespace
@@ -356,6 +343,9 @@ struct SurfaceIndex::Impl {
   }
   bool masked_edge_boundary(int group, const char* mask) const;
   bool masked_on_boundary(int f, int region, const char* mask) const;
+  // The normals, origin, diagonal and roundings from the mesh; returns the coordinates'
+  // magnitude (the largest of the diagonal and the box's coordinates).
+  double set_frame();
   void build_scene();
   void build_tree(std::span<const Corners> corners, double pad);
   // The Embree scene or the box tree, whichever the engine queries (after the corners).
@@ -719,28 +709,13 @@ SurfaceIndex::SurfaceIndex(const Mesh& mesh, QueryEngine engine, double reach)
   m.engine = engine;
   m.reach = reach;
   m.mesh = mesh;
-  m.normals = face_normals(mesh);
-  const BoundingBox box = bounding_box(mesh);
-  m.origin = 0.5 * (box.min + box.max);
-  m.diagonal = box.diagonal();
-  m.slack = 1e-6 * m.diagonal;
-  // Footpoints are rounded relative to the coordinates' magnitude, not to the diagonal.
-  const double scale =
-      std::max({m.diagonal, box.min.cwiseAbs().maxCoeff(), box.max.cwiseAbs().maxCoeff()});
-  m.on_surface = 1e-14 * scale;
-
   const int nf = mesh.face_count();
-  Buffer<Corners> corners(static_cast<std::size_t>(nf));
-  parallel_for(0, static_cast<std::size_t>(nf), [&](std::size_t begin, std::size_t end) {
-    for (std::size_t f = begin; f < end; ++f) {
-      const auto fi = static_cast<Eigen::Index>(f);
-      corners[f] = {mesh.V.row(mesh.F(fi, 0)), mesh.V.row(mesh.F(fi, 1)), mesh.V.row(mesh.F(fi, 2))};
-    }
-  }, 4096);
   if (m.engine == QueryEngine::kCells) {
     // An index for a few bounded queries (Ω's): its two builds are mostly serial, the faces'
-    // adjacency after a parallel sort and the cell table, and independent, so they run side
+    // adjacency after the edges' sort and the cell table, and independent, so they run side
     // by side. Each writes its own members; the result does not depend on which ends first.
+    const double scale = m.set_frame();
+    Buffer<Corners> corners = corner_table(mesh);
     const double grow = reach * (1.0 + 1e-9) + 1e-12 * scale;
     parallel_invoke_each(2, [&](std::size_t task) {
       if (task == 0) {
@@ -762,9 +737,11 @@ SurfaceIndex::SurfaceIndex(const Mesh& mesh, QueryEngine engine, double reach)
     m.face_corners = std::move(corners);
     return;
   }
-  // The boundary (from the sorted edges) and the search structure are independent and each
-  // writes its own members, so they are built side by side: the other thread takes the
-  // edges' work while the tree's top splits run on one. The search structure, which makes
+  // The boundary (from the sorted edges) and the rest (the frame, the corners and the search
+  // structure) are independent and each writes its own members, so they are built side by
+  // side from the start: the other thread takes the edges' work while this one makes the
+  // normals and corners and the tree's top splits, and a small mesh's build does not wait
+  // for a sleeping thread to wake before its first loop. The search structure, which makes
   // the large allocations, is built on this thread, and the edges' buffer is allocated here
   // too: from a worker thread's heap they were unmapped when freed, and the next index of a
   // large mesh faulted them in again (the 256k cone rung in a loop: 51k page faults before
@@ -775,7 +752,22 @@ SurfaceIndex::SurfaceIndex(const Mesh& mesh, QueryEngine engine, double reach)
         fill_sorted_edge_slots(mesh, edges);
         m.build_boundary(edges);
       },
-      [&] { m.build_search(corners, 1e-12 * scale); });
+      [&] {
+        const double scale = m.set_frame();
+        m.build_search(corner_table(mesh), 1e-12 * scale);
+      });
+}
+
+double SurfaceIndex::Impl::set_frame() {
+  normals = face_normals(mesh);
+  const BoundingBox box = bounding_box(mesh);
+  origin = 0.5 * (box.min + box.max);
+  diagonal = box.diagonal();
+  slack = 1e-6 * diagonal;
+  // Footpoints are rounded relative to the coordinates' magnitude, not to the diagonal.
+  const double scale = std::max({diagonal, box.min.cwiseAbs().maxCoeff(), box.max.cwiseAbs().maxCoeff()});
+  on_surface = 1e-14 * scale;
+  return scale;
 }
 
 void SurfaceIndex::Impl::build_search(std::span<const Corners> corners, double pad) {
@@ -857,7 +849,7 @@ void SurfaceIndex::Impl::build_tree(std::span<const Corners> corners, double pad
       leaf_corners[i] = corners[static_cast<std::size_t>(order[i])];
       face_position[static_cast<std::size_t>(order[i])] = static_cast<std::int32_t>(i);
     }
-  }, 4096);
+  }, 1024);
   const std::span<const ObbLeaf> leaves = tree.leaves();
   packs = Buffer<LeafPack>(leaves.size());
   parallel_for(0, leaves.size(), [&](std::size_t begin, std::size_t end) {
@@ -883,7 +875,7 @@ void SurfaceIndex::Impl::build_tree(std::span<const Corners> corners, double pad
         pack_lane(k, l, leaf_corners[static_cast<std::size_t>(k.first + (l < k.count ? l : 0))]);
       k.always &= (std::uint32_t{1} << k.count) - 1;
     }
-  }, 256);
+  }, 32);
 }
 
 SurfaceIndex::~SurfaceIndex() = default;

@@ -1,10 +1,17 @@
 // subdivide_midpoint: the finer re-mesh of the scaling ladder keeps the surface exactly.
+// sorted_edge_slots: the edges' order the index's boundary and adjacency are read from.
 #include "kernels/mesh.h"
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <cstdint>
+#include <random>
 #include <set>
 #include <utility>
+#include <vector>
+
+#include "kernels/parallel.h"
 
 #include "io/read_mesh.h"
 #include "kernels/surface_index.h"
@@ -48,6 +55,55 @@ TEST(SubdivideMidpoint, EmptyMeshStaysEmpty) {
   const Mesh fine = subdivide_midpoint(Mesh{});
   EXPECT_EQ(fine.vertex_count(), 0);
   EXPECT_EQ(fine.face_count(), 0);
+}
+
+// The edge slots come out in exactly std::sort's order of (vertex pair, slot), at any thread
+// count: on a real part, on random faces over few vertices (edges shared by many faces, so
+// equal keys), with a fan whose centre has hundreds of edges (a bucket sorted by std::sort,
+// not by insertion), with faces repeated (the same key in many slots), and with none.
+TEST(SortedEdgeSlots, EqualStdSortOfTheKeyedSlots) {
+  const auto expected = [](const Mesh& m) {
+    std::vector<KeyedIndex> e;
+    for (int f = 0; f < m.face_count(); ++f)
+      for (int k = 0; k < 3; ++k) {
+        const auto u = static_cast<std::uint64_t>(m.F(f, k)), v = static_cast<std::uint64_t>(m.F(f, (k + 1) % 3));
+        e.push_back({(std::min(u, v) << 32) | std::max(u, v), 3 * f + k});
+      }
+    std::sort(e.begin(), e.end());
+    return e;
+  };
+  std::vector<Mesh> meshes{io::read_mesh(FLANK_TEST_DATA_DIR "/../../data/propeller_blade_upper.stl").mesh};
+  std::mt19937 rng(11);
+  for (const int nv : {3, 40, 5000}) {
+    Mesh m;
+    m.V = Points::Random(nv, 3);
+    m.F.resize(3 * nv, 3);
+    for (int f = 0; f < m.face_count(); ++f) {
+      std::vector<int> pick;
+      while (pick.size() < 3) {  // three distinct vertices
+        const int v = static_cast<int>(rng() % static_cast<unsigned>(nv));
+        if (std::find(pick.begin(), pick.end(), v) == pick.end()) pick.push_back(v);
+      }
+      m.F.row(f) << pick[0], pick[1], pick[2];
+    }
+    meshes.push_back(m);
+  }
+  Mesh fan;  // vertex 0 at the centre of 600 faces, every one given twice
+  fan.V = Points::Random(601, 3);
+  fan.F.resize(1200, 3);
+  for (int i = 0; i < 600; ++i) fan.F.row(2 * i) = fan.F.row(2 * i + 1) = Eigen::RowVector3i(0, 1 + i, 1 + (i + 1) % 600);
+  meshes.push_back(fan);
+  meshes.emplace_back();
+  for (const Mesh& m : meshes) {
+    const std::vector<KeyedIndex> want = expected(m);
+    for (const int threads : {1, 2}) {
+      const ThreadLimit limit(threads);
+      const Buffer<KeyedIndex> got = sorted_edge_slots(m);
+      ASSERT_EQ(got.size(), want.size());
+      EXPECT_TRUE(std::equal(got.begin(), got.end(), want.begin()))
+          << m.face_count() << " faces, " << threads << " threads";
+    }
+  }
 }
 
 }  // namespace

@@ -2,11 +2,8 @@
 
 #include <gtest/gtest.h>
 
-#include <algorithm>
 #include <atomic>
 #include <chrono>
-#include <cstdint>
-#include <random>
 #include <stdexcept>
 #include <thread>
 #include <utility>
@@ -14,22 +11,6 @@
 
 namespace flank {
 namespace {
-
-// The concurrent sort gives std::sort's order at any thread count, duplicate keys included
-// (the index adjacency sorts edge keys that repeat once per face sharing the edge).
-TEST(Parallel, SortEqualsStdSortWhateverTheThreadCount) {
-  std::mt19937_64 rng(5);
-  std::vector<KeyedIndex> items(200000);
-  for (std::size_t i = 0; i < items.size(); ++i) items[i] = {rng() % 50000, static_cast<std::int32_t>(rng() % 1000)};
-  std::vector<KeyedIndex> expected = items;
-  std::sort(expected.begin(), expected.end());
-  for (const int threads : {1, 2}) {
-    const ThreadLimit limit(threads);
-    std::vector<KeyedIndex> sorted = items;
-    parallel_sort(sorted);
-    EXPECT_EQ(sorted, expected) << threads << " threads";
-  }
-}
 
 // A Buffer's elements are what its filler writes; an empty one holds nothing.
 TEST(Parallel, BufferHoldsWhatAParallelLoopWrites) {
