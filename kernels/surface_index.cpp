@@ -740,8 +740,7 @@ SurfaceIndex::SurfaceIndex(const Mesh& mesh, QueryEngine engine, double reach)
   // The boundary (from the sorted edges) and the rest (the frame, the corners and the search
   // structure) are independent and each writes its own members, so they are built side by
   // side from the start: the other thread takes the edges' work while this one makes the
-  // normals and corners and the tree's top splits, and a small mesh's build does not wait
-  // for a sleeping thread to wake before its first loop. The search structure, which makes
+  // normals and corners and the tree's top splits. The search structure, which makes
   // the large allocations, is built on this thread, and the edges' buffer is allocated here
   // too: from a worker thread's heap they were unmapped when freed, and the next index of a
   // large mesh faulted them in again (the 256k cone rung in a loop: 51k page faults before

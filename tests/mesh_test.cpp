@@ -11,9 +11,8 @@
 #include <utility>
 #include <vector>
 
-#include "kernels/parallel.h"
-
 #include "io/read_mesh.h"
+#include "kernels/parallel.h"
 #include "kernels/surface_index.h"
 
 namespace flank {
