@@ -68,6 +68,17 @@ struct DecomposeOptions {
   // lines when none of the faces whose cover the search read has changed since (the search is
   // deterministic and reads the cover nowhere else: the same lines either way).
   bool reuse_seeds = true;
+  // Seeds are searched in order, and the search pauses at the first seed with a line whose
+  // probe sweep passed over nearly all of Φ (all but min_round_gain of its area). The lines
+  // found so far are then ranked and grown as growth would grow them (those that may cover
+  // coverage_target alone, one at a time in rank order). If the first patch that covers the
+  // target alone leaves less than min_round_gain of Φ uncovered, the round's search ends
+  // there and the seeds after are never searched; otherwise it goes on, and what was grown is
+  // reused. A part one sweep covers is searched at one or a few seeds instead of some twenty;
+  // its patch may come from another line than the search of every seed would grow first, and
+  // then covers at most min_round_gain less. No line of the four real faces passes over that
+  // much: their search never pauses, and finds what it found before.
+  bool grow_early = true;
   int control_points = 16, samples_t = 48, samples_s = 16, iterations = 10;
   // A fit that starts from a fitted motion (a trimmed sweep, the first trim's other pieces)
   // is near its optimum already. Against 10 on the same 422 candidates of the 17 coverage

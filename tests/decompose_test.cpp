@@ -223,6 +223,73 @@ TEST(Decompose, CandidatesThatMayCoverThePartAreGrownOneAtATime) {
   }
 }
 
+void expect_same_patches(const DecomposeResult& x, const DecomposeResult& y, const std::string& what) {
+  EXPECT_EQ(x.coverage_curve, y.coverage_curve) << what;
+  ASSERT_EQ(x.patches.size(), y.patches.size()) << what;
+  for (std::size_t k = 0; k < x.patches.size(); ++k) {
+    EXPECT_EQ(x.patches[k].motion.a, y.patches[k].motion.a) << what;
+    EXPECT_EQ(x.patches[k].motion.b, y.patches[k].motion.b) << what;
+    EXPECT_EQ(x.patches[k].cutter.coeffs, y.patches[k].cutter.coeffs) << what;
+  }
+}
+
+// A part one sweep covers is searched only up to the first seed with a line whose probe sweep
+// passed over nearly all of it: on the cone part that line's patch leaves less than
+// min_round_gain uncovered, the seeds after are never searched, and the patch is the one the
+// search of every seed finds, at every thread count.
+TEST(Decompose, APartOneSweepCoversIsSearchedAtItsFirstSeeds) {
+  const SynthResult part = testing::paper_part(PaperTool::cone, 61, 21);
+  const SurfaceIndex index(part.mesh);
+  DecomposeOptions o = defaults(index, CutterKind::cone);
+  o.grow_early = false;
+  const DecomposeResult every = decompose(index, o);
+  report("cone 61x21, every seed searched", every, index.diagonal());
+  o.grow_early = true;
+  for (int threads : {1, 2}) {
+    ThreadLimit limit(threads);
+    const DecomposeResult early = decompose(index, o);
+    report("cone 61x21, searched up to a line that covers it", early, index.diagonal());
+    EXPECT_GE(early.coverage, 1.0 - o.min_round_gain);
+    EXPECT_LT(2 * early.lines_scored, every.lines_scored) << threads << " threads";
+    EXPECT_LT(2 * early.candidates, every.candidates) << threads << " threads";
+    EXPECT_EQ(early.grown, 1);
+    expect_same_patches(early, every, std::to_string(threads) + " threads");
+  }
+}
+
+// Where the first patch that covers the target alone still leaves min_round_gain or more
+// uncovered, the search goes on through every seed, and the candidates grown before it did
+// are reused by growth: the same lines, patches and counts as the search of every seed. On the
+// cylinder part with spline cutters, a line at the first seeds passes over nearly all of it,
+// and its patch covers less than 99% (the search of every seed: 98.3% with three grown).
+TEST(Decompose, APatchThatLeavesTooMuchLetsTheSearchGoOn) {
+  const SynthResult part = testing::paper_part(PaperTool::cylinder, 61, 21);
+  const SurfaceIndex index(part.mesh);
+  DecomposeOptions o = defaults(index, CutterKind::spline);
+  o.grow_early = false;
+  const DecomposeResult every = decompose(index, o);
+  ASSERT_LT(every.coverage, 1.0 - o.min_round_gain);
+  ASSERT_GE(every.coverage, o.coverage_target);
+  o.grow_early = true;
+  for (int threads : {1, 2}) {
+    ThreadLimit limit(threads);
+    int early_grown = 0;  // fits traced before the round's candidates were all listed
+    bool listed = false;
+    std::mutex mutex;
+    o.trace = [&](const std::string& line) {
+      const std::lock_guard<std::mutex> lock(mutex);
+      if (line.rfind("round 1 seed ", 0) == 0) listed = true;
+      if (line.rfind("grow seed ", 0) == 0 && !listed) ++early_grown;
+    };
+    const DecomposeResult early = decompose(index, o);
+    EXPECT_GT(early_grown, 0) << threads << " threads";
+    EXPECT_EQ(early.lines_scored, every.lines_scored) << threads << " threads";
+    EXPECT_EQ(early.candidates, every.candidates) << threads << " threads";
+    EXPECT_EQ(early.grown, every.grown) << threads << " threads";
+    expect_same_patches(early, every, std::to_string(threads) + " threads");
+  }
+}
+
 // A growth batch that adds less than min_round_gain to the pool's greedy cover ends the
 // round's growth. On the cone part the first batch grows the patch that covers it; with a
 // target no patch reaches, the second batch adds less than 1% and no third is grown, while
