@@ -6,6 +6,9 @@
 #include <limits>
 #include <numbers>
 #include <numeric>
+#include <optional>
+
+#include "kernels/parallel.h"
 
 namespace flank {
 
@@ -156,11 +159,17 @@ std::vector<LineCandidate> seed_candidates(const SurfaceIndex& index, const Seed
                                            const CandidateLineOptions& o,
                                            const Thresholds& thresholds, long long* scored,
                                            std::vector<FreeRunRecord>* runs) {
-  // Free runs through the cover, recorded where asked.
-  auto free_run_through = [&](const Vec3& mid, const Vec3& u) {
+  // Each stage's lines are independent of one another and run concurrently; what each finds
+  // (lines, free runs, counts) is kept per task and joined in task order, which is the order
+  // of a serial loop: the result is the same at every thread count.
+  // Free runs through the cover, recorded (per task) where asked.
+  auto free_run_through = [&](const Vec3& mid, const Vec3& u, std::vector<FreeRunRecord>& records) {
     const FreeRun run = free_run(index, mid, u, o.length_max, covered);
-    if (runs) runs->push_back({mid, u, o.length_max, run});
+    if (runs) records.push_back({mid, u, o.length_max, run});
     return run;
+  };
+  const auto join_records = [&](std::vector<FreeRunRecord>& records) {
+    if (runs) runs->insert(runs->end(), records.begin(), records.end());
   };
   const double L_ref = std::sqrt(o.length_min * o.length_max);
   const CutterKind general = o.kinds.back();
@@ -179,34 +188,39 @@ std::vector<LineCandidate> seed_candidates(const SurfaceIndex& index, const Seed
   if (steer.size() > 1) coarse.second_profile = steer.back();
   // A line through a seed near Φ's edge overhangs it: lay_line fits it to Φ later.
   coarse.max_boundary_fraction = 0.5;
-  std::vector<Scored> all;
-  std::vector<int> hints(static_cast<std::size_t>(o.coarse_samples), -1);
-  for (double r : geometric(o.radius_min, o.radius_max, o.radii))
-    for (int t = 0; t < o.tilts; ++t) {
-      const double tilt = o.tilts == 1 ? 0.0
-                                       : (-1.0 + 2.0 * t / (o.tilts - 1)) * o.max_tilt_deg *
-                                             std::numbers::pi / 180.0;
-      std::fill(hints.begin(), hints.end(), -1);
-      for (int d = 0; d < o.directions; ++d) {
-        const double th = std::numbers::pi * d / o.directions;
-        const Vec3 tangent = std::cos(th) * seed.dir_min + std::sin(th) * seed.dir_max;
-        const Vec3 u = std::cos(tilt) * tangent + std::sin(tilt) * seed.normal;
-        const Vec3 mid = seed.point + r * seed.normal;
-        Scored c;
-        c.line = {mid - 0.5 * L_ref * u, mid + 0.5 * L_ref * u};
-        // Warm start from the previous direction's footpoints: neighbours share faces.
-        c.movability = movability(index, c.line.a, c.line.b, coarse, hints);
-        ++*scored;
-        if (!acceptable(c.movability, o, L_ref)) continue;
-        c.score = line_score(c.movability, L_ref);
-        c.second_score = c.score;
-        if (coarse.second_profile) {
-          const double misfit = c.movability.second_profile_rms / L_ref;
-          c.second_score = c.movability.value + kProfileWeight * misfit * misfit;
-        }
-        all.push_back(c);
+  const std::vector<double> radii = geometric(o.radius_min, o.radius_max, o.radii);
+  // One task per offset and tilt, over the directions.
+  const std::size_t groups = radii.size() * static_cast<std::size_t>(o.tilts);
+  std::vector<std::vector<Scored>> scored_by_group(groups);
+  parallel_invoke_each(groups, [&](std::size_t g) {
+    const double r = radii[g / static_cast<std::size_t>(o.tilts)];
+    const int t = static_cast<int>(g % static_cast<std::size_t>(o.tilts));
+    const double tilt = o.tilts == 1 ? 0.0
+                                     : (-1.0 + 2.0 * t / (o.tilts - 1)) * o.max_tilt_deg *
+                                           std::numbers::pi / 180.0;
+    std::vector<int> hints(static_cast<std::size_t>(o.coarse_samples), -1);
+    for (int d = 0; d < o.directions; ++d) {
+      const double th = std::numbers::pi * d / o.directions;
+      const Vec3 tangent = std::cos(th) * seed.dir_min + std::sin(th) * seed.dir_max;
+      const Vec3 u = std::cos(tilt) * tangent + std::sin(tilt) * seed.normal;
+      const Vec3 mid = seed.point + r * seed.normal;
+      Scored c;
+      c.line = {mid - 0.5 * L_ref * u, mid + 0.5 * L_ref * u};
+      // Warm start from the previous direction's footpoints: neighbours share faces.
+      c.movability = movability(index, c.line.a, c.line.b, coarse, hints);
+      if (!acceptable(c.movability, o, L_ref)) continue;
+      c.score = line_score(c.movability, L_ref);
+      c.second_score = c.score;
+      if (coarse.second_profile) {
+        const double misfit = c.movability.second_profile_rms / L_ref;
+        c.second_score = c.movability.value + kProfileWeight * misfit * misfit;
       }
+      scored_by_group[g].push_back(c);
     }
+  });
+  *scored += static_cast<long long>(groups) * o.directions;
+  std::vector<Scored> all;
+  for (const std::vector<Scored>& group : scored_by_group) all.insert(all.end(), group.begin(), group.end());
   // The best by each steering profile's score, half each (stable: ties never depend on
   // anything but generation order); a line among both counts once.
   {
@@ -236,8 +250,7 @@ std::vector<LineCandidate> seed_candidates(const SurfaceIndex& index, const Seed
   // Aim: each of the best is laid over the free part of Φ at the longest length that fits
   // there (L0) and aimed anew at that length, over the offsets and a few small turns, with each
   // steering profile. A short line cannot tell directions apart that a long one can: at the
-  // reference length a line 15° off a ruling may score as well as the ruling.
-  const std::vector<double> radii = geometric(o.radius_min, o.radius_max, o.radii);
+  // reference length a line 15° off a ruling may score as well as the ruling. One task each.
   const double turn = o.aim_turn_deg * std::numbers::pi / 180.0;
   struct Aimed {
     Vec3 u = Vec3::Zero();
@@ -245,13 +258,16 @@ std::vector<LineCandidate> seed_candidates(const SurfaceIndex& index, const Seed
     std::vector<Line> start;      // per steering kind
     std::vector<double> score;    // per steering kind
     double best = std::numeric_limits<double>::infinity();
+    std::vector<FreeRunRecord> records;
+    long long lines = 0;
   };
-  std::vector<Aimed> aimed;
-  for (const Scored& c : all) {
-    Aimed a;
+  std::vector<Aimed> aimed(all.size());
+  parallel_invoke_each(all.size(), [&](std::size_t i) {
+    const Scored& c = all[i];
+    Aimed& a = aimed[i];
     a.u = (c.line.b - c.line.a).normalized();
     const Vec3 mid0 = 0.5 * (c.line.a + c.line.b);
-    const FreeRun run0 = free_run_through(mid0, a.u);
+    const FreeRun run0 = free_run_through(mid0, a.u, a.records);
     a.L0 = laid_length(run0, o);
     const Line laid = lay_line(mid0, a.u, a.L0, run0, o.overhang);
     const Vec3 centre = 0.5 * (laid.a + laid.b);
@@ -271,7 +287,7 @@ std::vector<LineCandidate> seed_candidates(const SurfaceIndex& index, const Seed
         const Vec3 m = centre + (seed.point + r * seed.normal - mid0);
         const Line l{m - 0.5 * a.L0 * d, m + 0.5 * a.L0 * d};
         const std::vector<ClosestPoint> feet = line_footpoints(index, l.a, l.b, fine.samples, aim_hints);
-        ++*scored;
+        ++a.lines;
         for (std::size_t si = 0; si < steer.size(); ++si) {
           MovabilityOptions mo = fine;
           mo.profile = steer[si];
@@ -282,14 +298,25 @@ std::vector<LineCandidate> seed_candidates(const SurfaceIndex& index, const Seed
         }
       }
     for (double sc : a.score) a.best = std::min(a.best, sc);
-    aimed.push_back(std::move(a));
+  });
+  for (Aimed& a : aimed) {
+    *scored += a.lines;
+    join_records(a.records);
   }
   std::stable_sort(aimed.begin(), aimed.end(), [](const Aimed& x, const Aimed& y) { return x.best < y.best; });
 
-  // The best distinct directions, each refined and laid across the free part of Φ at a few
-  // lengths.
+  // The best distinct directions, each refined with each steering profile (one task each) and
+  // laid across the free part of Φ at a few lengths.
   std::vector<Vec3> kept_dirs;
-  std::vector<LineCandidate> out;
+  struct Refined {
+    const Aimed* aimed = nullptr;
+    std::size_t steering = 0;
+    Vec3 axis = Vec3::Zero(), mid = Vec3::Zero();
+    std::vector<std::pair<double, FreeRun>> laid;  // lengths and the runs they are laid over
+    std::vector<FreeRunRecord> records;
+    long long lines = 0;
+  };
+  std::vector<Refined> refined_lines;
   const double cos_distinct = std::cos(o.distinct_deg * std::numbers::pi / 180.0);
   for (const Aimed& a : aimed) {
     if (!std::isfinite(a.best) || static_cast<int>(kept_dirs.size()) >= o.directions_kept) break;
@@ -297,93 +324,125 @@ std::vector<LineCandidate> seed_candidates(const SurfaceIndex& index, const Seed
     for (const Vec3& k : kept_dirs) distinct &= std::abs(a.u.dot(k)) < cos_distinct;
     if (!distinct) continue;
     kept_dirs.push_back(a.u);
-    for (std::size_t si = 0; si < steer.size(); ++si) {
-      const CutterKind steering = steer[si];
-      if (!std::isfinite(a.score[si])) continue;
-      const Line& start = a.start[si];
-      // The local search (Fig. 8) refines the axis once, laid at the longest length; the
-      // shorter lengths are laid along the refined axis.
-      RefineLineOptions ro;
-      ro.kind = steering;
-      ro.movability = fine;
-      ro.movability.samples = o.refine_samples;
-      ro.movability.profile = steering;
-      ro.candidates_per_end = o.refine_candidates;
-      ro.rounds = o.refine_rounds;
-      ro.profile_weight = kProfileWeight;
-      ro.radius_min = o.radius_min;
-      ro.radius_max = o.radius_max;
-      const RefinedLine refined = refine_line(index, start, ro);
-      *scored += refined.evaluated;
-      if (o.trace) {
-        char line[400];
-        std::snprintf(line, sizeof line,
-                      "seed %d direction %.3f,%.3f,%.3f L0 %.2f aimed score %.2e; refined with %s: F_l %.2e, misfit "
-                      "%.2e, radii %.2f..%.2f",
-                      seed_id, a.u.x(), a.u.y(), a.u.z(), a.L0, a.score[si], std::string(to_string(steering)).c_str(),
-                      refined.movability.value, refined.movability.profile_rms, refined.movability.radius_min,
-                      refined.movability.radius_max);
-        o.trace(line);
+    for (std::size_t si = 0; si < steer.size(); ++si)
+      if (std::isfinite(a.score[si])) {
+        Refined rl;
+        rl.aimed = &a;
+        rl.steering = si;
+        refined_lines.push_back(std::move(rl));
       }
-      if (!refined.movability.ok()) continue;
-      const Vec3 axis = (refined.line.b - refined.line.a).normalized();
-      const Vec3 mid = 0.5 * (refined.line.a + refined.line.b);
-      // The lengths: across the free part of Φ, then halved; and, once part of Φ is covered,
-      // also across Φ regardless of it: a long sweep over covered area may replace several
-      // short ones in the cover (greedy_cover's swaps), where gap-fillers alone cannot.
-      const FreeRun run = free_run_through(mid, axis);
-      std::vector<std::pair<double, FreeRun>> laid;
-      if (!covered.empty()) {
-        const FreeRun whole = free_run(index, mid, axis, o.length_max, {});
-        if (whole.low + whole.high > 1.1 * (run.low + run.high)) laid.emplace_back(laid_length(whole, o), whole);
-      }
-      double len = laid_length(run, o);
-      for (int k = 0; k < o.lengths; ++k, len *= 0.5) {
-        if (len < o.length_min * (1.0 - 1e-9)) break;
-        laid.emplace_back(len, run);
-      }
-      for (const auto& [L, on] : laid) {
-        LineCandidate lc;
-        lc.line = lay_line(mid, axis, L, on, o.overhang);
-        // The simplest allowed kind that follows the line's distances; the most general one
-        // must at least fit them within line_misfit.
-        bool found = false;
-        const std::vector<ClosestPoint> feet = line_footpoints(index, lc.line.a, lc.line.b, fine.samples);
-        ++*scored;
-        for (CutterKind kind : o.kinds) {
-          MovabilityOptions mk = fine;
-          mk.profile = kind;
-          const Movability m = movability_from_footpoints(lc.line.a, lc.line.b, feet, mk);
-          const double limit = kind == general ? thresholds.line_misfit : thresholds.kind_misfit;
-          if (acceptable(m, o, L) && m.profile_rms <= limit) {
-            lc.kind = kind;
-            lc.movability = m;
-            found = true;
-            break;
-          }
-        }
-        if (!found) continue;
-        lc.seed = seed_id;
-        lc.score = line_score(lc.movability, L);
-        lc.inside = L * (lc.movability.samples - lc.movability.boundary_samples) /
-                    std::max(1, lc.movability.samples);
-        PropagateOptions po;
-        po.movability.samples = o.probe_samples;
-        po.movability.max_boundary_fraction = 0.5;
-        po.step = o.step;
-        po.max_travel = o.max_travel;
-        // The sweep ends where its cutter stops fitting (max_profile_error), not on a rate: F_l
-        // here only guards against a line thrown off Φ (0.1 mm of approach per mm of travel).
-        po.max_movability = 1e-2;
-        po.max_profile_error = thresholds.sweep_misfit;
-        // The sweep's rulings do not depend on the cover; what it passes over that is still
-        // to cut does (rank_candidates).
-        lc.sweep = propagate(index, lc.line, po);
-        lc.order = static_cast<int>(out.size());
-        if (lc.sweep.rulings.size() >= 4) out.push_back(std::move(lc));
-      }
+  }
+  parallel_invoke_each(refined_lines.size(), [&](std::size_t i) {
+    Refined& rl = refined_lines[i];
+    const Aimed& a = *rl.aimed;
+    const CutterKind steering = steer[rl.steering];
+    // The local search (Fig. 8) refines the axis once, laid at the longest length; the
+    // shorter lengths are laid along the refined axis.
+    RefineLineOptions ro;
+    ro.kind = steering;
+    ro.movability = fine;
+    ro.movability.samples = o.refine_samples;
+    ro.movability.profile = steering;
+    ro.candidates_per_end = o.refine_candidates;
+    ro.rounds = o.refine_rounds;
+    ro.profile_weight = kProfileWeight;
+    ro.radius_min = o.radius_min;
+    ro.radius_max = o.radius_max;
+    const RefinedLine refined = refine_line(index, a.start[rl.steering], ro);
+    rl.lines += refined.evaluated;
+    if (o.trace) {
+      char line[400];
+      std::snprintf(line, sizeof line,
+                    "seed %d direction %.3f,%.3f,%.3f L0 %.2f aimed score %.2e; refined with %s: F_l %.2e, misfit "
+                    "%.2e, radii %.2f..%.2f",
+                    seed_id, a.u.x(), a.u.y(), a.u.z(), a.L0, a.score[rl.steering],
+                    std::string(to_string(steering)).c_str(), refined.movability.value,
+                    refined.movability.profile_rms, refined.movability.radius_min, refined.movability.radius_max);
+      o.trace(line);
+    }
+    if (!refined.movability.ok()) return;
+    rl.axis = (refined.line.b - refined.line.a).normalized();
+    rl.mid = 0.5 * (refined.line.a + refined.line.b);
+    // The lengths: across the free part of Φ, then halved; and, once part of Φ is covered,
+    // also across Φ regardless of it: a long sweep over covered area may replace several
+    // short ones in the cover (greedy_cover's swaps), where gap-fillers alone cannot.
+    const FreeRun run = free_run_through(rl.mid, rl.axis, rl.records);
+    if (!covered.empty()) {
+      const FreeRun whole = free_run(index, rl.mid, rl.axis, o.length_max, {});
+      if (whole.low + whole.high > 1.1 * (run.low + run.high)) rl.laid.emplace_back(laid_length(whole, o), whole);
+    }
+    double len = laid_length(run, o);
+    for (int k = 0; k < o.lengths; ++k, len *= 0.5) {
+      if (len < o.length_min * (1.0 - 1e-9)) break;
+      rl.laid.emplace_back(len, run);
+    }
+  });
+  // Each laid line judged and swept: one task each.
+  struct Laid {
+    const Refined* from = nullptr;
+    double L = 0.0;
+    const FreeRun* on = nullptr;
+    std::optional<LineCandidate> candidate;
+  };
+  std::vector<Laid> laid;
+  for (Refined& rl : refined_lines) {
+    *scored += rl.lines;
+    join_records(rl.records);
+    for (const auto& [L, on] : rl.laid) {
+      Laid l;
+      l.from = &rl;
+      l.L = L;
+      l.on = &on;
+      laid.push_back(std::move(l));
     }
   }
+  parallel_invoke_each(laid.size(), [&](std::size_t i) {
+    const Refined& rl = *laid[i].from;
+    const double L = laid[i].L;
+    LineCandidate lc;
+    lc.line = lay_line(rl.mid, rl.axis, L, *laid[i].on, o.overhang);
+    // The simplest allowed kind that follows the line's distances; the most general one
+    // must at least fit them within line_misfit.
+    bool found = false;
+    const std::vector<ClosestPoint> feet = line_footpoints(index, lc.line.a, lc.line.b, fine.samples);
+    for (CutterKind kind : o.kinds) {
+      MovabilityOptions mk = fine;
+      mk.profile = kind;
+      const Movability m = movability_from_footpoints(lc.line.a, lc.line.b, feet, mk);
+      const double limit = kind == general ? thresholds.line_misfit : thresholds.kind_misfit;
+      if (acceptable(m, o, L) && m.profile_rms <= limit) {
+        lc.kind = kind;
+        lc.movability = m;
+        found = true;
+        break;
+      }
+    }
+    if (!found) return;
+    lc.seed = seed_id;
+    lc.score = line_score(lc.movability, L);
+    lc.inside = L * (lc.movability.samples - lc.movability.boundary_samples) /
+                std::max(1, lc.movability.samples);
+    PropagateOptions po;
+    po.movability.samples = o.probe_samples;
+    po.movability.max_boundary_fraction = 0.5;
+    po.step = o.step;
+    po.max_travel = o.max_travel;
+    // The sweep ends where its cutter stops fitting (max_profile_error), not on a rate: F_l
+    // here only guards against a line thrown off Φ (0.1 mm of approach per mm of travel).
+    po.max_movability = 1e-2;
+    po.max_profile_error = thresholds.sweep_misfit;
+    // The sweep's rulings do not depend on the cover; what it passes over that is still
+    // to cut does (rank_candidates).
+    lc.sweep = propagate(index, lc.line, po);
+    if (lc.sweep.rulings.size() >= 4) laid[i].candidate = std::move(lc);
+  });
+  *scored += static_cast<long long>(laid.size());
+  std::vector<LineCandidate> out;
+  for (Laid& l : laid)
+    if (l.candidate) {
+      l.candidate->order = static_cast<int>(out.size());
+      out.push_back(std::move(*l.candidate));
+    }
   rank_candidates(out, covered);
   return out;
 }

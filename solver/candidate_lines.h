@@ -100,8 +100,9 @@ struct FreeRunRecord {
 // Whether every recorded free_run finds exactly the same run under `covered`.
 bool free_runs_hold(const SurfaceIndex& index, const std::vector<FreeRunRecord>& runs, const CoveredFaces& covered);
 
-// The candidate lines at one seed, best estimate first. Deterministic; runs on the calling
-// thread. `scored` counts the lines whose footpoints were queried (a line judged with several
+// The candidate lines at one seed, best estimate first. Deterministic, at every thread count:
+// each stage's lines are searched concurrently where threads are free (called from concurrent
+// tasks, each mostly stays on its own), and joined in a fixed order. `scored` counts the lines whose footpoints were queried (a line judged with several
 // cutter kinds counts once). `runs`, when given, receives every free_run the search made
 // through the cover, with what it found: which lines the search finds depends on the cover
 // through these alone, so at the same seed, under a cover where each gives the same again

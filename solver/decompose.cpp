@@ -335,6 +335,17 @@ DecomposeResult decompose(const SurfaceIndex& index, const DecomposeOptions& o, 
     bool covered_early = false;
     for (;;) {
       bool paused = look();  // seeds searched past the last pause
+      if (!paused && handed == 0 && !seeds.empty() && o.grow_early && cover.covered_area <= cover.total_area - nearly_all) {
+        // While Φ is nearly all uncovered (in the first round), the first seed by itself,
+        // with every thread inside its search: on a part one sweep covers, it often has the
+        // line that ends the search, and a second seed searched beside it would be searched
+        // for nothing. Elsewhere this is one seed of some twenty with both threads inside
+        // instead of one thread each, at some cost in efficiency.
+        search(0);
+        searched[0] = 1;
+        handed = 1;
+        paused = look();
+      }
       if (!paused && handed < seeds.size()) {
         std::mutex looked_mutex;
         std::atomic<bool> pause{false};

@@ -13,6 +13,7 @@
 #include <limits>
 #include <numbers>
 
+#include "kernels/parallel.h"
 #include "solver/seed_tiles.h"
 #include "solver/thresholds.h"
 #include "test_parts.h"
@@ -440,6 +441,59 @@ TEST(SeedCandidates, LinesFoundUnderOneCoverRankForAnotherAsASearchThere) {
   EXPECT_TRUE(changed) << "the later cover should change what some sweep passes over";
   // Covering the seed's own rows changes its free runs: its search is not reused.
   EXPECT_FALSE(free_runs_hold(p.index, runs, block(kRows / 2 + 12, 0)));
+}
+
+// A seed's search runs its lines concurrently and joins what each found in a fixed order: at
+// one thread and at two it finds the same lines in the same order, records the same free runs
+// in the same order (what decompose's reuse of a search compares) and counts the same lines.
+// With the kinds up to the barrel, two profiles steer the search (two refinements per
+// direction), and under a partial cover the lines are also laid across the covered part.
+TEST(SeedCandidates, TheSameLinesRunsAndCountAtEveryThreadCount) {
+  const ConePart p;
+  const Mesh& m = p.part.mesh;
+  const Seed seed = seed_at(m, (kRows / 2 + 10) * kCols + kCols / 2, 0.12 * p.diag);
+  const Thresholds th = thresholds_for(1e-4 * p.diag);
+  CoveredFaces covered(static_cast<std::size_t>(m.face_count()), 0);
+  for (int f = 0; f < m.face_count(); ++f)
+    covered[static_cast<std::size_t>(f)] = m.F(f, 0) / kCols < kRows / 3 && m.F(f, 1) / kCols < kRows / 3 &&
+                                           m.F(f, 2) / kCols < kRows / 3;
+  for (const std::vector<CutterKind>& kinds :
+       {std::vector<CutterKind>{CutterKind::cone, CutterKind::barrel},
+        std::vector<CutterKind>{CutterKind::cylinder, CutterKind::cone, CutterKind::barrel, CutterKind::spline}}) {
+    const CandidateLineOptions o = decompose_like(p.diag, kinds);
+    struct Search {
+      std::vector<LineCandidate> lines;
+      std::vector<FreeRunRecord> runs;
+      long long scored = 0;
+    };
+    auto search = [&](int threads) {
+      const ThreadLimit limit(threads);
+      Search s;
+      s.lines = seed_candidates(p.index, seed, 0, covered, o, th, &s.scored, &s.runs);
+      return s;
+    };
+    const Search one = search(1);
+    ASSERT_GE(one.lines.size(), 4u) << to_string(kinds.back());
+    for (int round = 0; round < 3; ++round) {
+      const Search two = search(2);
+      EXPECT_EQ(two.scored, one.scored);
+      ASSERT_EQ(two.lines.size(), one.lines.size());
+      for (std::size_t k = 0; k < one.lines.size(); ++k) {
+        EXPECT_EQ(two.lines[k].order, one.lines[k].order) << k;
+        EXPECT_EQ(two.lines[k].line.a, one.lines[k].line.a) << k;
+        EXPECT_EQ(two.lines[k].line.b, one.lines[k].line.b) << k;
+        EXPECT_EQ(two.lines[k].kind, one.lines[k].kind) << k;
+        EXPECT_EQ(two.lines[k].estimate, one.lines[k].estimate) << k;
+        EXPECT_EQ(two.lines[k].sweep.rulings.size(), one.lines[k].sweep.rulings.size()) << k;
+      }
+      ASSERT_EQ(two.runs.size(), one.runs.size());
+      for (std::size_t k = 0; k < one.runs.size(); ++k) {
+        EXPECT_EQ(two.runs[k].mid, one.runs[k].mid) << k;
+        EXPECT_EQ(two.runs[k].u, one.runs[k].u) << k;
+        EXPECT_EQ(two.runs[k].run, one.runs[k].run) << k;
+      }
+    }
+  }
 }
 
 TEST(CandidateLineOptions, ValidateNamesTheProblem) {
