@@ -318,15 +318,18 @@ DecomposeResult decompose(const SurfaceIndex& index, const DecomposeOptions& o, 
                        [](const LineCandidate& x, const LineCandidate& y) { return x.estimate > y.estimate; });
       return lines;
     };
-    // A line that may cover the target alone is tried before the seeds after its own are
+    // A line that may cover nearly all of Φ is tried before the seeds after its own are
     // searched (DecomposeOptions::grow_early): seeds [0, looked) have been searched and looked
-    // at in order, and the search pauses at the first whose lines include one.
+    // at in order, and the search pauses at the first whose lines include one. Once, in a
+    // round: where that try leaves too much, one patch rarely leaves less (a coarse mesh, a
+    // surface not quite one envelope), and each try costs fits.
     std::vector<char> searched(seeds.size(), 0);
     std::size_t handed = 0, looked = 0;
-    const auto look = [&] {  // true when it took in a seed with a line that may cover alone
+    bool may_pause = o.grow_early;
+    const auto look = [&] {  // true when it took in a seed with a line that may cover nearly all
       while (looked < seeds.size() && searched[looked]) {
         const std::vector<LineCandidate>& ls = per_seed[looked++];
-        if (o.grow_early && std::any_of(ls.begin(), ls.end(), [&](const LineCandidate& c) { return c.estimate >= nearly_all; }))
+        if (may_pause && std::any_of(ls.begin(), ls.end(), [&](const LineCandidate& c) { return c.estimate >= nearly_all; }))
           return true;
       }
       return false;
@@ -335,7 +338,7 @@ DecomposeResult decompose(const SurfaceIndex& index, const DecomposeOptions& o, 
     bool covered_early = false;
     for (;;) {
       bool paused = look();  // seeds searched past the last pause
-      if (!paused && handed == 0 && !seeds.empty() && o.grow_early && cover.covered_area <= cover.total_area - nearly_all) {
+      if (!paused && handed == 0 && !seeds.empty() && may_pause && cover.covered_area <= cover.total_area - nearly_all) {
         // While Φ is nearly all uncovered (in the first round), the first seed by itself,
         // with every thread inside its search: on a part one sweep covers, it often has the
         // line that ends the search, and a second seed searched beside it would be searched
@@ -371,9 +374,13 @@ DecomposeResult decompose(const SurfaceIndex& index, const DecomposeOptions& o, 
       // grow them from these seeds' lines. One that covers it ends the search; the lines of
       // these seeds are then the round's candidates.
       std::vector<LineCandidate> first = ranked(looked);
+      if (o.trace)
+        o.trace("round " + std::to_string(round + 1) + " paused after seed " + std::to_string(looked - 1) + " of " +
+                std::to_string(seeds.size()) + ": a line may cover nearly all of the part");
       const auto t_early = Clock::now();
       const bool done = grow_alone(first);
       early_s += since(t_early);
+      may_pause = false;
       if (done) {
         lines = std::move(first);
         covered_early = true;

@@ -73,8 +73,8 @@ struct DecomposeOptions {
   // found so far are then ranked and grown as growth would grow them (those that may cover
   // coverage_target alone, one at a time in rank order). If the first patch that covers the
   // target alone leaves less than min_round_gain of Φ uncovered, the round's search ends
-  // there and the seeds after are never searched; otherwise it goes on, and what was grown is
-  // reused. A part one sweep covers is searched at one or a few seeds instead of some twenty;
+  // there and the seeds after are never searched; otherwise it goes on without pausing again
+  // in that round, and what was grown is reused. A part one sweep covers is searched at one or a few seeds instead of some twenty;
   // its patch may come from another line than the search of every seed would grow first, and
   // then covers at most min_round_gain less. No line of the four real faces passes over that
   // much: their search never pauses, and finds what it found before.
