@@ -370,9 +370,9 @@ DecomposeResult decompose(const SurfaceIndex& index, const DecomposeOptions& o, 
         lines = ranked(seeds.size());
         break;
       }
-      // Seeds [0, looked) hold a line that may cover the target alone: grown as step 3 would
-      // grow them from these seeds' lines. One that covers it ends the search; the lines of
-      // these seeds are then the round's candidates.
+      // Seeds [0, looked) hold a line that may cover nearly all of Φ: these seeds' lines are
+      // grown as step 3 would grow them. A patch that leaves less than min_round_gain ends the
+      // search, and these seeds' lines are then the round's candidates.
       std::vector<LineCandidate> first = ranked(looked);
       if (o.trace)
         o.trace("round " + std::to_string(round + 1) + " paused after seed " + std::to_string(looked - 1) + " of " +
