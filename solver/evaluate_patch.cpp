@@ -26,7 +26,6 @@ ErrorGrid sample_errors(const SurfaceIndex& index, const Motion& motion, const C
   ErrorGrid grid;
   grid.rows = rows, grid.cols = cols;
   const std::size_t n = static_cast<std::size_t>(rows) * cols;
-  Points q(static_cast<Eigen::Index>(n), 3);
   std::vector<double> d(static_cast<std::size_t>(cols)), dd(static_cast<std::size_t>(cols));
   for (int j = 0; j < cols; ++j) {
     const double s = static_cast<double>(j) / (cols - 1);
@@ -35,48 +34,67 @@ ErrorGrid sample_errors(const SurfaceIndex& index, const Motion& motion, const C
   }
   std::vector<Line> rulings(static_cast<std::size_t>(rows));
   std::vector<Vec3> a_t(static_cast<std::size_t>(rows)), b_t(static_cast<std::size_t>(rows));
-  for (int i = 0; i < rows; ++i) {
-    const double t = static_cast<double>(i) / (rows - 1);
-    rulings[i] = motion.ruling(t);
-    a_t[i] = motion.a_at(t, 1);
-    b_t[i] = motion.b_at(t, 1);
-    for (int j = 0; j < cols; ++j)
-      q.row(static_cast<Eigen::Index>(grid.index(i, j))) = rulings[i].point(static_cast<double>(j) / (cols - 1)).transpose();
-  }
-  const std::vector<ClosestPoint> cp = index.closest_points(q);
   grid.sphere_error.resize(static_cast<Eigen::Index>(n));
   grid.interior.resize(n);
   grid.faces.resize(n);
   grid.directions.resize(static_cast<Eigen::Index>(n), 3);
-  for (std::size_t k = 0; k < n; ++k) {
-    grid.directions.row(static_cast<Eigen::Index>(k)) = cp[k].direction.transpose();
-    grid.interior[k] = !cp[k].boundary && cp[k].face >= 0;
-    // Beyond Φ's edge the sign of the face plane means nothing: there a sphere gouges only
-    // if it reaches Φ at all.
-    grid.sphere_error(static_cast<Eigen::Index>(k)) =
-        (grid.interior[k] ? cp[k].signed_distance : cp[k].distance) - d[k % static_cast<std::size_t>(cols)];
-    grid.faces[k] = cp[k].face;
-  }
-
-  // Ω's points: on Φ's side, the envelope normal points from the axis toward the footpoint.
   grid.omega.resize(static_cast<Eigen::Index>(n), 3);
-  grid.omega_valid.assign(n, 0);
+  grid.omega_valid.resize(n);
+  grid.omega_interior.resize(n);
+  grid.error.resize(static_cast<Eigen::Index>(n));
+  if (untrusted_edges) grid.untrusted.resize(n);
+  const Mesh& m = index.mesh();
+  const auto at_edge = [&](int f) {
+    return f >= 0 && (index.is_boundary_vertex(m.F(f, 0)) || index.is_boundary_vertex(m.F(f, 1)) ||
+                      index.is_boundary_vertex(m.F(f, 2)));
+  };
+  // Row by row, each row whole in one task: its centres' closest points (each warm-started
+  // from the one before it on the row), its envelope points, and theirs (warm-started from
+  // the centre's footpoint face: Ω's points lie near Φ, next to it). A row's results go
+  // straight into the grid: no batch of every sample's answer (72 bytes each, twice), whose
+  // fresh pages cost more than the copy, and no serial pass over the samples.
   parallel_for(0, static_cast<std::size_t>(rows), [&](std::size_t b, std::size_t e) {
+    Points centres(cols, 3);
+    std::vector<ClosestPoint> cp(static_cast<std::size_t>(cols)), op(static_cast<std::size_t>(cols));
     for (std::size_t ii = b; ii < e; ++ii) {
       const int i = static_cast<int>(ii);
+      const double t = static_cast<double>(i) / (rows - 1);
+      rulings[ii] = motion.ruling(t);
+      a_t[ii] = motion.a_at(t, 1);
+      b_t[ii] = motion.b_at(t, 1);
+      for (int j = 0; j < cols; ++j) centres.row(j) = rulings[ii].point(static_cast<double>(j) / (cols - 1)).transpose();
+      index.closest_points_serial(centres, {}, cp);
       const Vec3 rs = rulings[ii].b - rulings[ii].a;
+      const std::size_t k0 = grid.index(i, 0);
       for (int j = 0; j < cols; ++j) {
+        const std::size_t k = k0 + static_cast<std::size_t>(j);
+        const ClosestPoint& c = cp[static_cast<std::size_t>(j)];
+        grid.directions.row(static_cast<Eigen::Index>(k)) = c.direction.transpose();
+        grid.interior[k] = !c.boundary && c.face >= 0;
+        // Beyond Φ's edge the sign of the face plane means nothing: there a sphere gouges
+        // only if it reaches Φ at all.
+        grid.sphere_error(static_cast<Eigen::Index>(k)) = (grid.interior[k] ? c.signed_distance : c.distance) - d[j];
+        grid.faces[k] = c.face;
+        // Ω's points: on Φ's side, the envelope normal points from the axis toward the footpoint.
         const double s = static_cast<double>(j) / (cols - 1);
-        const std::size_t k = grid.index(i, j);
-        const Vec3 centre = q.row(static_cast<Eigen::Index>(k)).transpose();
+        const Vec3 centre = centres.row(j).transpose();
         const Vec3 rt = (1 - s) * a_t[ii] + s * b_t[ii];
-        const Vec3 g = grid.directions.row(static_cast<Eigen::Index>(k)).transpose();
-        const EnvelopePoint ep = envelope_point(centre, rt, rs, d[j], dd[j], envelope_side(rt, rs, -g));
+        const EnvelopePoint ep = envelope_point(centre, rt, rs, d[j], dd[j], envelope_side(rt, rs, -c.direction));
         grid.omega_valid[k] = ep.valid;
         grid.omega.row(static_cast<Eigen::Index>(k)) = (ep.valid ? ep.point : centre).transpose();
       }
+      index.closest_points_serial(grid.omega.middleRows(static_cast<Eigen::Index>(k0), cols),
+                                  std::span<const int>(grid.faces).subspan(k0, static_cast<std::size_t>(cols)), op);
+      for (int j = 0; j < cols; ++j) {
+        const std::size_t k = k0 + static_cast<std::size_t>(j);
+        const ClosestPoint& o = op[static_cast<std::size_t>(j)];
+        if (untrusted_edges) grid.untrusted[k] = at_edge(o.face) || at_edge(cp[static_cast<std::size_t>(j)].face);
+        const bool over = grid.omega_valid[k] && o.face >= 0 && !o.boundary;
+        grid.omega_interior[k] = over;
+        grid.error(static_cast<Eigen::Index>(k)) = over ? o.signed_distance : 0.0;
+      }
     }
-  });
+  }, 1);
   // The sweep across the axis, at the axis midpoint: a row where it is slow (a fifth of the
   // median) or reverses against a neighbour row is where the motion stalls or turns back.
   {
@@ -97,24 +115,6 @@ ErrorGrid sample_errors(const SurfaceIndex& index, const Motion& motion, const C
                         (i + 1 < rows && across[i].dot(across[i + 1]) < 0);
       grid.sweeps[i] = !(speed[i] < slow || back);
     }
-  }
-  // Ω's points lie near Φ, next to the centres' footpoints: warm-started, these queries are cheap.
-  const std::vector<ClosestPoint> op = index.closest_points(grid.omega, grid.faces);
-  grid.omega_interior.assign(n, 0);
-  grid.error = VecX::Zero(static_cast<Eigen::Index>(n));
-  if (untrusted_edges) {
-    const Mesh& m = index.mesh();
-    auto at_edge = [&](int f) {
-      return f >= 0 && (index.is_boundary_vertex(m.F(f, 0)) || index.is_boundary_vertex(m.F(f, 1)) ||
-                        index.is_boundary_vertex(m.F(f, 2)));
-    };
-    grid.untrusted.assign(n, 0);
-    for (std::size_t k = 0; k < n; ++k) grid.untrusted[k] = at_edge(op[k].face) || at_edge(cp[k].face);
-  }
-  for (std::size_t k = 0; k < n; ++k) {
-    if (!grid.omega_valid[k] || op[k].face < 0 || op[k].boundary) continue;
-    grid.omega_interior[k] = 1;
-    grid.error(static_cast<Eigen::Index>(k)) = op[k].signed_distance;
   }
   return grid;
 }
