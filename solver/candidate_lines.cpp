@@ -158,7 +158,16 @@ std::vector<LineCandidate> seed_candidates(const SurfaceIndex& index, const Seed
                                            const CoveredFaces& covered,
                                            const CandidateLineOptions& o,
                                            const Thresholds& thresholds, long long* scored,
-                                           std::vector<FreeRunRecord>* runs) {
+                                           std::vector<FreeRunRecord>* runs, SearchStop* stop) {
+  // Read at the start of each task, and after each stage (where `stopped` is set, on this
+  // thread). The flag only ever goes from unset to set, so a task that skipped its work is
+  // seen by the check after its stage.
+  const auto halted = [&] { return stop && stop->flag && stop->flag->load(std::memory_order_relaxed); };
+  const auto stopped = [&] {
+    if (!halted()) return false;
+    stop->stopped = true;
+    return true;
+  };
   // Each stage's lines are independent of one another and run concurrently; what each finds
   // (lines, free runs, counts) is kept per task and joined in task order, which is the order
   // of a serial loop: the result is the same at every thread count.
@@ -193,6 +202,7 @@ std::vector<LineCandidate> seed_candidates(const SurfaceIndex& index, const Seed
   const std::size_t groups = radii.size() * static_cast<std::size_t>(o.tilts);
   std::vector<std::vector<Scored>> scored_by_group(groups);
   parallel_invoke_each(groups, [&](std::size_t g) {
+    if (halted()) return;
     const double r = radii[g / static_cast<std::size_t>(o.tilts)];
     const int t = static_cast<int>(g % static_cast<std::size_t>(o.tilts));
     const double tilt = o.tilts == 1 ? 0.0
@@ -218,6 +228,7 @@ std::vector<LineCandidate> seed_candidates(const SurfaceIndex& index, const Seed
       scored_by_group[g].push_back(c);
     }
   });
+  if (stopped()) return {};
   *scored += static_cast<long long>(groups) * o.directions;
   std::vector<Scored> all;
   for (const std::vector<Scored>& group : scored_by_group) all.insert(all.end(), group.begin(), group.end());
@@ -263,6 +274,7 @@ std::vector<LineCandidate> seed_candidates(const SurfaceIndex& index, const Seed
   };
   std::vector<Aimed> aimed(all.size());
   parallel_invoke_each(all.size(), [&](std::size_t i) {
+    if (halted()) return;
     const Scored& c = all[i];
     Aimed& a = aimed[i];
     a.u = (c.line.b - c.line.a).normalized();
@@ -299,6 +311,7 @@ std::vector<LineCandidate> seed_candidates(const SurfaceIndex& index, const Seed
       }
     for (double sc : a.score) a.best = std::min(a.best, sc);
   });
+  if (stopped()) return {};
   for (Aimed& a : aimed) {
     *scored += a.lines;
     join_records(a.records);
@@ -333,6 +346,7 @@ std::vector<LineCandidate> seed_candidates(const SurfaceIndex& index, const Seed
       }
   }
   parallel_invoke_each(refined_lines.size(), [&](std::size_t i) {
+    if (halted()) return;
     Refined& rl = refined_lines[i];
     const Aimed& a = *rl.aimed;
     const CutterKind steering = steer[rl.steering];
@@ -385,6 +399,7 @@ std::vector<LineCandidate> seed_candidates(const SurfaceIndex& index, const Seed
     std::optional<LineCandidate> candidate;
   };
   std::vector<Laid> laid;
+  if (stopped()) return {};
   for (Refined& rl : refined_lines) {
     *scored += rl.lines;
     join_records(rl.records);
@@ -397,6 +412,7 @@ std::vector<LineCandidate> seed_candidates(const SurfaceIndex& index, const Seed
     }
   }
   parallel_invoke_each(laid.size(), [&](std::size_t i) {
+    if (halted()) return;
     const Refined& rl = *laid[i].from;
     const double L = laid[i].L;
     LineCandidate lc;
@@ -436,6 +452,7 @@ std::vector<LineCandidate> seed_candidates(const SurfaceIndex& index, const Seed
     lc.sweep = propagate(index, lc.line, po);
     if (lc.sweep.rulings.size() >= 4) laid[i].candidate = std::move(lc);
   });
+  if (stopped()) return {};
   *scored += static_cast<long long>(laid.size());
   std::vector<LineCandidate> out;
   for (Laid& l : laid)

@@ -6,6 +6,7 @@
 // area they can cover: that, not an exact-envelope threshold, ranks them.
 #pragma once
 
+#include <atomic>
 #include <functional>
 #include <string>
 #include <vector>
@@ -107,11 +108,21 @@ bool free_runs_hold(const SurfaceIndex& index, const std::vector<FreeRunRecord>&
 // through the cover, with what it found: which lines the search finds depends on the cover
 // through these alone, so at the same seed, under a cover where each gives the same again
 // (free_runs_hold), it finds the same lines, ranked for that cover by rank_candidates.
+//
+// `stop`, when given, lets another thread end the search part-way: its flag is read at the
+// start of each stage and of each stage's tasks, and once it is set the search returns early
+// with `stopped` set. A stopped search's lines, count and records are incomplete: discard
+// them (decompose stops the seeds still searched beside one whose lines end its search).
+struct SearchStop {
+  const std::atomic<bool>* flag = nullptr;
+  bool stopped = false;
+};
 std::vector<LineCandidate> seed_candidates(const SurfaceIndex& index, const Seed& seed, int seed_id,
                                            const CoveredFaces& covered,
                                            const CandidateLineOptions& options,
                                            const Thresholds& thresholds, long long* scored,
-                                           std::vector<FreeRunRecord>* runs = nullptr);
+                                           std::vector<FreeRunRecord>* runs = nullptr,
+                                           SearchStop* stop = nullptr);
 
 // Each line's `sweep.fresh`, `swept` and `estimate` for the cover `covered` (empty: none), and
 // the lines in the order seed_candidates returns them: best estimate first, then `order`.

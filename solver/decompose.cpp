@@ -299,17 +299,25 @@ DecomposeResult decompose(const SurfaceIndex& index, const DecomposeOptions& o, 
     const bool keep = o.reuse_seeds && !covered.empty();
     std::vector<char> reused(seeds.size(), 0);
     std::vector<std::vector<FreeRunRecord>> runs(seeds.size());
-    const auto search = [&](std::size_t s) {
+    // Searches seed s; false when `stop` ended the search part-way (nothing of it is kept: the
+    // seed is searched again if the search goes on).
+    const auto search = [&](std::size_t s, const std::atomic<bool>* stop) {
       const std::vector<LineCandidate>* known = keep ? seed_cache.find(work, seeds[s], covered) : nullptr;
       if (known) {
         reused[s] = 1;
         per_seed[s] = *known;
         for (LineCandidate& c : per_seed[s]) c.seed = static_cast<int>(s);
         rank_candidates(per_seed[s], covered);
-      } else {
-        per_seed[s] = seed_candidates(work, seeds[s], static_cast<int>(s), covered, lo, th, &scored[s],
-                                      keep ? &runs[s] : nullptr);
+        return true;
       }
+      SearchStop halt{stop};
+      per_seed[s] = seed_candidates(work, seeds[s], static_cast<int>(s), covered, lo, th, &scored[s],
+                                    keep ? &runs[s] : nullptr, stop ? &halt : nullptr);
+      if (!halt.stopped) return true;
+      per_seed[s].clear();
+      scored[s] = 0;
+      runs[s].clear();
+      return false;
     };
     const auto ranked = [&](std::size_t seed_count) {  // the lines of seeds [0, seed_count), best first
       std::vector<LineCandidate> lines;
@@ -324,8 +332,8 @@ DecomposeResult decompose(const SurfaceIndex& index, const DecomposeOptions& o, 
     // round: where that try leaves too much, one patch rarely leaves less (a coarse mesh, a
     // surface not quite one envelope), and each try costs fits.
     std::vector<char> searched(seeds.size(), 0);
-    std::size_t handed = 0, looked = 0;
-    bool may_pause = o.grow_early;
+    std::size_t looked = 0;
+    bool may_pause = o.grow_early, first_alone = false;
     const auto look = [&] {  // true when it took in a seed with a line that may cover nearly all
       while (looked < seeds.size() && searched[looked]) {
         const std::vector<LineCandidate>& ls = per_seed[looked++];
@@ -338,32 +346,40 @@ DecomposeResult decompose(const SurfaceIndex& index, const DecomposeOptions& o, 
     bool covered_early = false;
     for (;;) {
       bool paused = look();  // seeds searched past the last pause
-      if (!paused && handed == 0 && !seeds.empty() && may_pause && cover.covered_area <= cover.total_area - nearly_all) {
+      if (!paused && !first_alone && !seeds.empty() && may_pause && cover.covered_area <= cover.total_area - nearly_all) {
         // While Φ is nearly all uncovered (in the first round), the first seed by itself,
         // with every thread inside its search: on a part one sweep covers, it often has the
         // line that ends the search, and a second seed searched beside it would be searched
         // for nothing. Elsewhere this is one seed of some twenty with both threads inside
         // instead of one thread each, at some cost in efficiency.
-        search(0);
+        first_alone = true;
+        search(0, nullptr);
         searched[0] = 1;
-        handed = 1;
         paused = look();
       }
-      if (!paused && handed < seeds.size()) {
+      // The seeds not yet searched, in seed order: after a pause, those searched beside the
+      // one that paused and stopped part-way come again.
+      std::vector<std::size_t> pending;
+      for (std::size_t s = looked; s < seeds.size(); ++s)
+        if (!searched[s]) pending.push_back(s);
+      if (!paused && !pending.empty()) {
         std::mutex looked_mutex;
         std::atomic<bool> pause{false};
-        std::atomic<std::size_t> next{handed};
+        std::atomic<std::size_t> next{0};
         parallel_invoke_each(static_cast<std::size_t>(max_threads()), [&](std::size_t) {
           while (!pause) {
-            const std::size_t s = next++;
-            if (s >= seeds.size()) return;
-            search(s);
+            const std::size_t i = next++;
+            if (i >= pending.size()) return;
+            const std::size_t s = pending[i];
+            // Once a seed before it pauses the search, a seed still searched is stopped: the
+            // try that follows gets every thread, and whether it ends the search or not, what
+            // the stopped seed would give is the same when searched again.
+            if (!search(s, may_pause ? &pause : nullptr)) continue;
             const std::lock_guard<std::mutex> lock(looked_mutex);
             searched[s] = 1;
             if (!pause && look()) pause = true;
           }
         });
-        handed = std::min(next.load(), seeds.size());
         paused = pause;
       }
       if (!paused) {

@@ -8,6 +8,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <atomic>
 #include <cmath>
 #include <cstdio>
 #include <limits>
@@ -493,6 +494,50 @@ TEST(SeedCandidates, TheSameLinesRunsAndCountAtEveryThreadCount) {
         EXPECT_EQ(two.runs[k].run, one.runs[k].run) << k;
       }
     }
+  }
+}
+
+// A search another thread may stop (decompose stops the seeds searched beside one whose
+// lines end its search): unset, the flag changes nothing; set before the search, nothing is
+// searched; set part-way (here from the trace of the first refinement), the search stops at
+// the next stage and says so. Each stopped search reports `stopped`, which is how decompose
+// knows to discard it.
+TEST(SeedCandidates, AStopEndsTheSearchAndSaysSo) {
+  const ConePart p;
+  const Mesh& m = p.part.mesh;
+  const Seed seed = seed_at(m, (kRows / 2 + 10) * kCols + kCols / 2, 0.12 * p.diag);
+  const Thresholds th = thresholds_for(1e-4 * p.diag);
+  CandidateLineOptions o = decompose_like(p.diag, {CutterKind::cone, CutterKind::barrel});
+  long long scored_free = 0;
+  const std::vector<LineCandidate> free = seed_candidates(p.index, seed, 0, {}, o, th, &scored_free);
+  ASSERT_GE(free.size(), 4u);
+  for (int threads : {1, 2}) {
+    const ThreadLimit limit(threads);
+    std::atomic<bool> flag{false};
+    SearchStop unset{&flag};
+    long long scored = 0;
+    const std::vector<LineCandidate> same = seed_candidates(p.index, seed, 0, {}, o, th, &scored, nullptr, &unset);
+    EXPECT_FALSE(unset.stopped);
+    EXPECT_EQ(scored, scored_free);
+    ASSERT_EQ(same.size(), free.size());
+    for (std::size_t k = 0; k < free.size(); ++k) EXPECT_EQ(same[k].line.a, free[k].line.a) << k;
+
+    flag = true;
+    SearchStop before{&flag};
+    scored = 0;
+    EXPECT_TRUE(seed_candidates(p.index, seed, 0, {}, o, th, &scored, nullptr, &before).empty());
+    EXPECT_TRUE(before.stopped) << threads;
+    EXPECT_EQ(scored, 0);
+
+    flag = false;
+    CandidateLineOptions traced = o;
+    traced.trace = [&](const std::string&) { flag = true; };
+    SearchStop part_way{&flag};
+    scored = 0;
+    EXPECT_TRUE(seed_candidates(p.index, seed, 0, {}, traced, th, &scored, nullptr, &part_way).empty());
+    EXPECT_TRUE(part_way.stopped) << threads;
+    EXPECT_GT(scored, 0);
+    EXPECT_LT(scored, scored_free);
   }
 }
 
