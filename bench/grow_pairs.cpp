@@ -55,6 +55,7 @@ double best_area(const flank::Grown& g) { return g.patches.empty() ? 0.0 : g.pat
 
 int main(int argc, char** argv) {
   flank::retain_freed_memory();  // as the flank command line runs
+  flank::prefer_huge_pages();
   CLI::App app{"Grow decompose's candidates twice, with its fit settings (A) and with others (B)"};
   std::string mesh_path, json_path;
   double tolerance_rel = 1e-4;

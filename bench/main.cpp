@@ -7,6 +7,7 @@
 int main(int argc, char** argv) {
   // As the flank command line runs (kernels/memory.h).
   flank::retain_freed_memory();
+  flank::prefer_huge_pages();
   flank::register_ladder_benchmarks();
   benchmark::Initialize(&argc, argv);
   if (benchmark::ReportUnrecognizedArguments(argc, argv)) return 1;

@@ -7,6 +7,7 @@
 
 int main(int argc, char** argv) {
   flank::retain_freed_memory();
+  flank::prefer_huge_pages();
   CLI::App app{
       "flank — finds patches of a design surface that one sweep of one rotary cutter can flank-mill,\n"
       "designs the cutter and its 5-axis motion, and proves the error and the collisions."};
