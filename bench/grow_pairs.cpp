@@ -29,8 +29,10 @@
 #include <bit>
 #include <cstdint>
 #include <cstdio>
+#include <cstdlib>
 #include <mutex>
 #include <string>
+#include <string_view>
 #include <tuple>
 #include <vector>
 
@@ -55,7 +57,7 @@ double best_area(const flank::Grown& g) { return g.patches.empty() ? 0.0 : g.pat
 
 int main(int argc, char** argv) {
   flank::retain_freed_memory();  // as the flank command line runs
-  flank::prefer_huge_pages();
+  if (const char* h = std::getenv("FLANK_HUGE_PAGES"); !h || std::string_view(h) != "0") flank::prefer_huge_pages();
   CLI::App app{"Grow decompose's candidates twice, with its fit settings (A) and with others (B)"};
   std::string mesh_path, json_path;
   double tolerance_rel = 1e-4;

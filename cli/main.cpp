@@ -2,12 +2,16 @@
 // lives in its own cmd_*.cpp and reports its exit code.
 #include <CLI/CLI.hpp>
 
+#include <cstdlib>
+#include <string_view>
+
 #include "cli/commands.h"
 #include "kernels/memory.h"
 
 int main(int argc, char** argv) {
   flank::retain_freed_memory();
-  flank::prefer_huge_pages();
+  // FLANK_HUGE_PAGES=0 leaves the heap in 4 KiB pages (kernels/memory.h).
+  if (const char* h = std::getenv("FLANK_HUGE_PAGES"); !h || std::string_view(h) != "0") flank::prefer_huge_pages();
   CLI::App app{
       "flank — finds patches of a design surface that one sweep of one rotary cutter can flank-mill,\n"
       "designs the cutter and its 5-axis motion, and proves the error and the collisions."};

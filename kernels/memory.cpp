@@ -10,7 +10,6 @@
 #include <sys/mman.h>
 
 #include <cstdint>
-#include <cstring>
 #include <fstream>
 #include <string>
 #endif
@@ -28,7 +27,6 @@ bool retain_freed_memory() {
 
 bool prefer_huge_pages() {
 #if defined(__GLIBC__) && !defined(__SANITIZE_ADDRESS__) && !defined(__SANITIZE_THREAD__)
-  if (const char* setting = std::getenv("FLANK_HUGE_PAGES"); setting && std::strcmp(setting, "0") == 0) return false;
   // "always [madvise] never": the advice counts unless the bracketed choice is never.
   std::string modes;
   std::getline(std::ifstream("/sys/kernel/mm/transparent_hugepage/enabled"), modes);

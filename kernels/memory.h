@@ -23,8 +23,8 @@ bool retain_freed_memory();
 // reservation from being handed back. The worker threads' own heaps are left as they are:
 // sending every thread to the main heap (one arena) made the blade faces 4-5% slower on 2
 // threads. True where the advice was taken and the system grants huge pages; false and a
-// no-op elsewhere (not glibc, the sanitizers' allocators, huge pages off), or when the
-// environment sets FLANK_HUGE_PAGES=0.
+// no-op elsewhere (not glibc, the sanitizers' allocators, huge pages off). The flank command
+// line and flank_bench skip it when the environment sets FLANK_HUGE_PAGES=0.
 bool prefer_huge_pages();
 
 }  // namespace flank
