@@ -13,18 +13,19 @@ namespace flank {
 // took effect; a no-op returning false where the C library is not glibc.
 bool retain_freed_memory();
 
-// Fresh memory from the main heap comes in 2 MiB pages where Linux allows them (transparent
-// huge pages, in its default "madvise" mode). A one-shot run pays for every page it touches
-// past its peak, and on the 2-core virtual machines flank runs on a 4 KiB page's first touch
-// takes 12-15 µs (bench/memory_benchmark.cpp, BM_FirstTouch): `flank decompose` of the 13k
-// cone part faulted 11k pages on one thread, some 0.13 s of its 0.55 s; a 2 MiB page costs
-// about what 16 small ones do. The heap's first 240 MiB are reserved at once (address space
+// Fresh memory comes in 2 MiB pages where Linux allows them (transparent huge pages, in its
+// default "madvise" mode). A one-shot run pays for every page it touches past its peak, and
+// on the 2-core virtual machines flank runs on a 4 KiB page's first touch takes 12-15 µs
+// (bench/memory_benchmark.cpp, BM_FirstTouch): `flank decompose` of the 13k cone part
+// faulted 11k pages on one thread, some 0.13 s of its 0.55 s; a 2 MiB page costs about what
+// 16 small ones do. The main heap's first 240 MiB, and 48 MiB of each worker thread's own
+// heap (as the thread starts: on_each_worker_thread), are reserved at once (address space
 // only) and advised for huge pages; call after retain_freed_memory, which keeps the
-// reservation from being handed back. The worker threads' own heaps are left as they are:
-// sending every thread to the main heap (one arena) made the blade faces 4-5% slower on 2
-// threads. True where the advice was taken and the system grants huge pages; false and a
-// no-op elsewhere (not glibc, the sanitizers' allocators, huge pages off). The flank command
-// line and flank_bench skip it when the environment sets FLANK_HUGE_PAGES=0.
+// reservations from being handed back. (Sending every thread to the main heap instead, one
+// arena, made the blade faces 4-5% slower on 2 threads.) True where the advice was taken and
+// the system grants huge pages; false and a no-op elsewhere (not glibc, the sanitizers'
+// allocators, huge pages off). The flank command line and flank_bench skip it when the
+// environment sets FLANK_HUGE_PAGES=0.
 bool prefer_huge_pages();
 
 }  // namespace flank

@@ -16,6 +16,7 @@
 #include <tbb/parallel_for.h>
 #include <tbb/task_arena.h>
 #include <tbb/task_group.h>
+#include <tbb/task_scheduler_observer.h>
 #endif
 
 #include <optional>
@@ -158,6 +159,8 @@ void serialize_library_threads() {
   static const tbb::global_control one_thread(tbb::global_control::max_allowed_parallelism, 1);
 }
 
+void on_each_worker_thread(std::function<void()>) {}  // the std::threads here live for one loop
+
 #else
 
 void parallel_for(std::size_t begin, std::size_t end,
@@ -237,6 +240,29 @@ int max_threads() {
 }
 
 void serialize_library_threads() {}
+
+namespace {
+// Runs its function once on each worker thread, when the thread first enters the scheduler.
+class FirstEntry : public tbb::task_scheduler_observer {
+ public:
+  explicit FirstEntry(std::function<void()> f) : f_(std::move(f)) { observe(true); }
+  void on_scheduler_entry(bool is_worker) override {
+    thread_local bool done = false;
+    if (!is_worker || done) return;
+    done = true;
+    f_();
+  }
+
+ private:
+  std::function<void()> f_;
+};
+}  // namespace
+
+void on_each_worker_thread(std::function<void()> f) {
+  // Never destroyed: it observes for the rest of the process, and at exit the scheduler may
+  // outlive any static object.
+  new FirstEntry(std::move(f));
+}
 
 #endif  // FLANK_TSAN_THREADS
 

@@ -74,6 +74,12 @@ class Buffer {
   std::size_t size_ = 0;
 };
 
+// From now on, `f` runs once on each worker thread, when the thread first takes part in
+// parallel work (before its first task): a per-thread setting an application makes once, at
+// start (kernels/memory.cpp). Call it at most once or twice in a process: each call adds
+// an observer that lives until the process ends. A no-op in the ThreadSanitizer build.
+void on_each_worker_thread(std::function<void()> f);
+
 // Caps the worker threads while it lives (--threads). n <= 0 leaves the default.
 class ThreadLimit {
  public:

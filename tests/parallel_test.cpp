@@ -2,8 +2,10 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
+#include <mutex>
 #include <stdexcept>
 #include <thread>
 #include <utility>
@@ -58,6 +60,48 @@ TEST(Parallel, RunBesideRunsHereOnTheCallingThreadAndBothToTheEnd) {
     }
     EXPECT_TRUE(finished) << "beside ran to its end before the exception left";
   }
+}
+
+// on_each_worker_thread: the function runs on a worker thread before that thread's first
+// task, once per thread however many loops follow, and never on the calling thread. Two
+// tasks that each wait until both have started force a worker into the loop.
+TEST(Parallel, OnEachWorkerThreadRunsOncePerWorkerBeforeItsFirstTask) {
+#if defined(__SANITIZE_THREAD__)
+  GTEST_SKIP() << "the ThreadSanitizer build runs loops on threads of their own: a no-op there";
+#else
+  const ThreadLimit limit(2);
+  if (max_threads() < 2) GTEST_SKIP() << "one thread only";
+  const std::thread::id caller = std::this_thread::get_id();
+  // Static: the function stays installed for the rest of the process.
+  static std::mutex mutex;
+  static std::vector<std::thread::id> ran_on;
+  on_each_worker_thread([] {
+    const std::lock_guard<std::mutex> lock(mutex);
+    ran_on.push_back(std::this_thread::get_id());
+  });
+  for (int loop = 0; loop < 5; ++loop) {
+    std::atomic<int> started{0};
+    std::atomic<bool> worker_had_run{true};
+    parallel_invoke_each(2, [&](std::size_t) {
+      {
+        const std::lock_guard<std::mutex> lock(mutex);
+        const bool seen = std::find(ran_on.begin(), ran_on.end(), std::this_thread::get_id()) != ran_on.end();
+        if (!seen && std::this_thread::get_id() != caller) worker_had_run = false;
+      }
+      ++started;
+      const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+      while (started < 2 && std::chrono::steady_clock::now() < until) std::this_thread::yield();
+    });
+    EXPECT_EQ(started, 2) << "loop " << loop << ": no worker took the second task in 20 s";
+    EXPECT_TRUE(worker_had_run) << "loop " << loop << ": a worker ran a task before the function";
+  }
+  const std::lock_guard<std::mutex> lock(mutex);
+  EXPECT_GE(ran_on.size(), 1u);
+  for (std::size_t i = 0; i < ran_on.size(); ++i) {
+    EXPECT_NE(ran_on[i], caller);
+    for (std::size_t j = 0; j < i; ++j) EXPECT_NE(ran_on[i], ran_on[j]) << "twice on one thread";
+  }
+#endif
 }
 
 // run_if_idle: on one thread `maybe` never runs. On two, a free thread takes it up while
