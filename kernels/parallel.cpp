@@ -9,7 +9,9 @@
 #include <thread>
 #include <vector>
 #else
+#include <algorithm>
 #include <atomic>
+#include <vector>
 
 #include <tbb/blocked_range.h>
 #include <tbb/global_control.h>
@@ -247,9 +249,11 @@ class FirstEntry : public tbb::task_scheduler_observer {
  public:
   explicit FirstEntry(std::function<void()> f) : f_(std::move(f)) { observe(true); }
   void on_scheduler_entry(bool is_worker) override {
-    thread_local bool done = false;
-    if (!is_worker || done) return;
-    done = true;
+    if (!is_worker) return;
+    // Per observer: a thread that entered for one has yet to enter for another.
+    thread_local std::vector<const FirstEntry*> entered;
+    if (std::find(entered.begin(), entered.end(), this) != entered.end()) return;
+    entered.push_back(this);
     f_();
   }
 

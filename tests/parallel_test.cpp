@@ -95,12 +95,26 @@ TEST(Parallel, OnEachWorkerThreadRunsOncePerWorkerBeforeItsFirstTask) {
     EXPECT_EQ(started, 2) << "loop " << loop << ": no worker took the second task in 20 s";
     EXPECT_TRUE(worker_had_run) << "loop " << loop << ": a worker ran a task before the function";
   }
-  const std::lock_guard<std::mutex> lock(mutex);
-  EXPECT_GE(ran_on.size(), 1u);
-  for (std::size_t i = 0; i < ran_on.size(); ++i) {
-    EXPECT_NE(ran_on[i], caller);
-    for (std::size_t j = 0; j < i; ++j) EXPECT_NE(ran_on[i], ran_on[j]) << "twice on one thread";
+  {
+    const std::lock_guard<std::mutex> lock(mutex);
+    EXPECT_GE(ran_on.size(), 1u);
+    for (std::size_t i = 0; i < ran_on.size(); ++i) {
+      EXPECT_NE(ran_on[i], caller);
+      for (std::size_t j = 0; j < i; ++j) EXPECT_NE(ran_on[i], ran_on[j]) << "twice on one thread";
+    }
   }
+  // A second function installed later runs too, on the workers that already ran the first.
+  static std::atomic<int> second_ran{0};
+  on_each_worker_thread([] { ++second_ran; });
+  for (int loop = 0; loop < 3 && second_ran == 0; ++loop) {
+    std::atomic<int> started{0};
+    parallel_invoke_each(2, [&](std::size_t) {
+      ++started;
+      const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+      while (started < 2 && std::chrono::steady_clock::now() < until) std::this_thread::yield();
+    });
+  }
+  EXPECT_GE(second_ran.load(), 1);
 #endif
 }
 
