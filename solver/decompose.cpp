@@ -281,8 +281,11 @@ DecomposeResult decompose(const SurfaceIndex& index, const DecomposeOptions& o, 
         ++taken;
         if (c.estimate < target_area) return false;
         const Grown* g = o.reuse_grown ? cache.find(c) : nullptr;
-        if (!g && !early.find(c)) early.entries.push_back({c.line, c.kind, c.sweep.rulings, grow_patch(work, c, go)});
         if (!g) g = early.find(c);
+        if (!g) {
+          early.entries.push_back({c.line, c.kind, c.sweep.rulings, grow_patch(work, c, go)});
+          g = &early.entries.back().grown;
+        }
         if (covers_alone(*g)) return ends_search(*g);
       }
       return false;
