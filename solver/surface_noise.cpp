@@ -15,23 +15,41 @@ struct Adjacency {
   std::vector<int> offsets, neighbours;  // CSR, 1-ring, ascending
 };
 
+// Each face edge listed at both its ends, bucketed by vertex (counting, then filling in face
+// order), then each vertex's list sorted and made unique in parallel and packed. A vector per
+// vertex (13k allocations and their growth on the 13k part) made this a serial 2.7 ms, a
+// fifth of the noise estimate on one thread.
 Adjacency one_rings(const Mesh& mesh) {
   const int V = mesh.vertex_count();
-  std::vector<std::vector<int>> rings(static_cast<std::size_t>(V));
+  const auto nv = static_cast<std::size_t>(V);
+  std::vector<int> start(nv + 1, 0);
+  for (int f = 0; f < mesh.face_count(); ++f)
+    for (int k = 0; k < 3; ++k) start[static_cast<std::size_t>(mesh.F(f, k)) + 1] += 2;
+  for (std::size_t v = 0; v < nv; ++v) start[v + 1] += start[v];
+  std::vector<int> listed(static_cast<std::size_t>(start[nv]));
+  std::vector<int> fill(start.begin(), start.end() - 1);
   for (int f = 0; f < mesh.face_count(); ++f)
     for (int k = 0; k < 3; ++k) {
       const int a = mesh.F(f, k), b = mesh.F(f, (k + 1) % 3);
-      rings[a].push_back(b);
-      rings[b].push_back(a);
+      listed[static_cast<std::size_t>(fill[static_cast<std::size_t>(a)]++)] = b;
+      listed[static_cast<std::size_t>(fill[static_cast<std::size_t>(b)]++)] = a;
     }
+  std::vector<int> unique_count(nv);
+  parallel_for(0, nv, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t v = begin; v < end; ++v) {
+      const auto first = listed.begin() + start[v], last = listed.begin() + start[v + 1];
+      std::sort(first, last);
+      unique_count[v] = static_cast<int>(std::unique(first, last) - first);
+    }
+  }, 1024);
   Adjacency adj;
-  adj.offsets.assign(1, 0);
-  for (auto& r : rings) {
-    std::sort(r.begin(), r.end());
-    r.erase(std::unique(r.begin(), r.end()), r.end());
-    adj.neighbours.insert(adj.neighbours.end(), r.begin(), r.end());
-    adj.offsets.push_back(static_cast<int>(adj.neighbours.size()));
-  }
+  adj.offsets.assign(nv + 1, 0);
+  for (std::size_t v = 0; v < nv; ++v) adj.offsets[v + 1] = adj.offsets[v] + unique_count[v];
+  adj.neighbours.resize(static_cast<std::size_t>(adj.offsets[nv]));
+  parallel_for(0, nv, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t v = begin; v < end; ++v)
+      std::copy_n(listed.begin() + start[v], unique_count[v], adj.neighbours.begin() + adj.offsets[v]);
+  }, 1024);
   return adj;
 }
 
