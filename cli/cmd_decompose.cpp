@@ -72,6 +72,7 @@ int run_decompose(const DecomposeArgs& a) {
   const std::unique_ptr<io::OutputSet> out = open_outputs(a);  // checked before any work
 
   ThreadLimit limit(a.threads);
+  start_worker_threads();  // while the input is read
   const Design design = read_design(a, progress);
   const io::LoadedMesh& lm = design.lm;
   const double t_index = progress.elapsed();

@@ -71,6 +71,7 @@ int run_fit(const FitArgs& a) {
   resolve_tolerance(a.tolerance, a.tolerance_rel, 1.0);  // refuse bad values before any work
   const std::unique_ptr<io::OutputSet> out = open_outputs(a);  // checked before any work
   ThreadLimit limit(a.threads);
+  start_worker_threads();  // while the input is read
   const Design design = read_design(a, progress);
   const io::LoadedMesh& lm = design.lm;
   const double t_index = progress.elapsed();

@@ -51,6 +51,7 @@ void register_movability(CLI::App& app, int* exit_code) {
   set_action(cmd, exit_code, [=] {
     const Line line = parse_line(args->line, "--line");
     ThreadLimit limit(args->threads);
+    start_worker_threads();  // while the input is read
     io::ReadOptions ro;
     ro.flip = args->flip;
     const io::LoadedMesh lm = io::read_mesh(args->mesh, ro);

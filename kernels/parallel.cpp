@@ -163,6 +163,8 @@ void serialize_library_threads() {
 
 void on_each_worker_thread(std::function<void()>) {}  // the std::threads here live for one loop
 
+void start_worker_threads() {}
+
 #else
 
 void parallel_for(std::size_t begin, std::size_t end,
@@ -266,6 +268,12 @@ void on_each_worker_thread(std::function<void()> f) {
   // Never destroyed: it observes for the rest of the process, and at exit the scheduler may
   // outlive any static object.
   new FirstEntry(std::move(f));
+}
+
+void start_worker_threads() {
+  // One empty task for each worker the limit allows: enqueued work wakes them (creating them
+  // the first time), and whoever runs it returns at once.
+  for (int w = 1; w < max_threads(); ++w) tbb::this_task_arena::enqueue([] {});
 }
 
 #endif  // FLANK_TSAN_THREADS

@@ -80,6 +80,12 @@ class Buffer {
 // an observer that lives until the process ends. A no-op in the ThreadSanitizer build.
 void on_each_worker_thread(std::function<void()> f);
 
+// Starts the worker threads now and returns at once: a process's first parallel loop
+// otherwise waits for them to be created and to run their on_each_worker_thread work. Called
+// before the input is read, their start overlaps the reading. Nothing to wait for, and a
+// no-op at one thread or in the ThreadSanitizer build.
+void start_worker_threads();
+
 // Caps the worker threads while it lives (--threads). n <= 0 leaves the default.
 class ThreadLimit {
  public:

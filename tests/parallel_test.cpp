@@ -65,6 +65,25 @@ TEST(Parallel, RunBesideRunsHereOnTheCallingThreadAndBothToTheEnd) {
 // on_each_worker_thread: the function runs on a worker thread before that thread's first
 // task, once per thread however many loops follow, and never on the calling thread. Two
 // tasks that each wait until both have started force a worker into the loop.
+// start_worker_threads starts them with no loop to run: the first loop of a process (the
+// index of the part) no longer waits for the thread to be made and to run its
+// on_each_worker_thread work, which the CLI now overlaps with reading the input.
+TEST(Parallel, StartWorkerThreadsStartsThemBeforeAnyLoop) {
+#if defined(__SANITIZE_THREAD__)
+  GTEST_SKIP() << "the ThreadSanitizer build runs loops on threads of their own: a no-op there";
+#else
+  const ThreadLimit limit(2);
+  if (max_threads() < 2) GTEST_SKIP() << "one thread only";
+  static std::atomic<int> started{0};
+  on_each_worker_thread([] { ++started; });
+  EXPECT_EQ(started.load(), 0);
+  start_worker_threads();
+  const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+  while (started == 0 && std::chrono::steady_clock::now() < until) std::this_thread::yield();
+  EXPECT_GE(started.load(), 1) << "no worker started in 20 s";
+#endif
+}
+
 TEST(Parallel, OnEachWorkerThreadRunsOncePerWorkerBeforeItsFirstTask) {
 #if defined(__SANITIZE_THREAD__)
   GTEST_SKIP() << "the ThreadSanitizer build runs loops on threads of their own: a no-op there";
