@@ -27,13 +27,27 @@
 //              `blade`; the acceptance tolerance 1e-4 × the diagonal with every cutter kind
 //              (the CLI's defaults) on the four faces, the product's real workload. The
 //              `tolerance_rel` counter says which.
+//   command    the same decompose as a user runs it: `flank decompose` in a process of its own,
+//              timed from outside (start, reading the file, every output written), on the
+//              rungs up to 64k triangles. The loop stages above run warm in one process; a
+//              user's run is cold, and pays for loading the libraries, creating the threads
+//              and faulting in fresh pages, which only this stage sees. Counters: the
+//              process's own decompose time (patches.json), page faults, peak memory.
 // The lines, query points, fit starts and decompose tolerance depend on the part, not on the
 // rung, so rungs of a part differ only in the mesh.
 #include "bench/ladder.h"
 
 #include <benchmark/benchmark.h>
 
+#include <fcntl.h>
+#include <spawn.h>
+#include <sys/resource.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
 #include <cmath>
+#include <filesystem>
+#include <fstream>
 #include <iostream>
 #include <map>
 #include <memory>
@@ -46,6 +60,7 @@
 
 #include "bench/runs.h"
 #include "io/read_mesh.h"
+#include "io/write_mesh.h"
 #include "kernels/mesh.h"
 #include "kernels/movability.h"
 #include "kernels/parallel.h"
@@ -54,6 +69,10 @@
 #include "solver/fit_motion.h"
 #include "solver/propagate.h"
 #include "solver/synth.h"
+
+#include <nlohmann/json.hpp>
+
+extern char** environ;
 
 namespace flank {
 namespace {
@@ -374,6 +393,82 @@ void bench_decompose(benchmark::State& state, Rung r, int threads) {
   state.counters["cutter_kinds"] = static_cast<double>(p.decompose_kinds.size());
 }
 
+// A folder of this process's own for the command stage's files, removed at exit.
+const std::filesystem::path& scratch_dir() {
+  struct Scratch {
+    std::filesystem::path path;
+    Scratch() {
+      path = std::filesystem::temp_directory_path() / ("flank-ladder-" + std::to_string(::getpid()));
+      std::filesystem::create_directories(path);
+    }
+    ~Scratch() {
+      std::error_code ignored;
+      std::filesystem::remove_all(path, ignored);
+    }
+  };
+  static const Scratch scratch;
+  return scratch.path;
+}
+
+// The rung as the file a user would give: a read part's own file, or the rung's mesh written.
+std::filesystem::path command_input(const Rung& r) {
+  if (r.part != Part::cone && r.level == 0) return mesh_path(r.part);
+  const std::filesystem::path path =
+      scratch_dir() / (std::string(name(r.part)) + "_" + std::to_string(r.level) + ".ply");
+  if (!std::filesystem::exists(path)) io::write_mesh(path, rung_data(r).mesh);
+  return path;
+}
+
+void bench_command(benchmark::State& state, Rung r, int threads) {
+  const PartData& p = part_data(r.part);
+  const std::filesystem::path input = command_input(r);
+  const std::filesystem::path out = scratch_dir() / "out";
+  std::string tools;
+  for (CutterKind k : p.decompose_kinds) {
+    if (!tools.empty()) tools += ',';
+    tools += to_string(k);
+  }
+  char tolerance[32];
+  std::snprintf(tolerance, sizeof tolerance, "%g", p.decompose_tolerance);
+  std::vector<std::string> args = {FLANK_CLI, "decompose", input.string(), "-o", out.string(), "-q",
+                                   "--threads", std::to_string(threads), "--tolerance-rel", tolerance};
+  if (!tools.empty()) args.insert(args.end(), {"--tool", tools});
+  std::vector<char*> argv;
+  for (std::string& a : args) argv.push_back(a.data());
+  argv.push_back(nullptr);
+  posix_spawn_file_actions_t quiet;
+  posix_spawn_file_actions_init(&quiet);
+  posix_spawn_file_actions_addopen(&quiet, 1, "/dev/null", O_WRONLY, 0);
+  posix_spawn_file_actions_addopen(&quiet, 2, "/dev/null", O_WRONLY, 0);
+  double faults = 0, peak_kb = 0, decompose_s = 0;
+  for (auto _ : state) {
+    pid_t pid = 0;
+    if (posix_spawn(&pid, argv[0], &quiet, nullptr, argv.data(), environ) != 0) {
+      state.SkipWithError((std::string("cannot start ") + argv[0]).c_str());
+      break;
+    }
+    int status = 0;
+    rusage usage{};
+    if (wait4(pid, &status, 0, &usage) != pid || !WIFEXITED(status) || WEXITSTATUS(status) != 0) {
+      state.SkipWithError(("flank decompose " + input.string() + " failed").c_str());
+      break;
+    }
+    faults += static_cast<double>(usage.ru_minflt + usage.ru_majflt);
+    peak_kb = std::max(peak_kb, static_cast<double>(usage.ru_maxrss));
+    state.PauseTiming();
+    std::ifstream in(out / "patches.json");
+    decompose_s += nlohmann::json::parse(in).at("timing_s").at("total").get<double>();
+    state.ResumeTiming();
+  }
+  posix_spawn_file_actions_destroy(&quiet);
+  const auto n = static_cast<double>(std::max<benchmark::IterationCount>(1, state.iterations()));
+  state.counters["triangles"] = static_cast<double>(rung_data(r).mesh.face_count());
+  state.counters["decompose_s"] = decompose_s / n;
+  state.counters["page_faults"] = faults / n;
+  state.counters["peak_mb"] = peak_kb / 1024.0;
+  state.counters["tolerance_rel"] = p.decompose_tolerance;
+}
+
 }  // namespace
 
 void register_ladder_benchmarks() {
@@ -398,11 +493,15 @@ void register_ladder_benchmarks() {
   const std::pair<const char*, Fn> stages[] = {
       {"index", bench_index},          {"query", bench_query},     {"query_warm", bench_query_warm},
       {"query_embree", bench_query_embree}, {"scoring", bench_scoring}, {"fit", bench_fit},
-      {"decompose", bench_decompose}};
+      {"decompose", bench_decompose}, {"command", bench_command}};
+  // The whole command up to 64k triangles: beyond, writing the outputs (the report's meshes)
+  // would outweigh the work, and the nightly ladder would spend minutes on files.
+  constexpr long long kCommandMaxTriangles = 65'000;
   // Rung by rung, so that each mesh is built once.
   for (const Rung& r : rungs)
     for (const auto& [stage, fn] : stages)
       for (int threads : {1, 2}) {
+        if (std::string_view(stage) == "command" && r.triangles > kCommandMaxTriangles) continue;
         const std::string bench_name = std::string("Ladder/") + stage + "/" + name(r.part) + "/tri_k:" +
                                        std::to_string(std::llround(static_cast<double>(r.triangles) / 1000.0)) +
                                        "/threads:" + std::to_string(threads);
@@ -410,7 +509,8 @@ void register_ladder_benchmarks() {
         // --benchmark_min_time; decompose runs once whenever it takes longer than that.
         benchmark::RegisterBenchmark(bench_name.c_str(), fn, r, threads)
             ->UseRealTime()
-            ->Unit(std::string(stage) == "decompose" ? benchmark::kSecond : benchmark::kMillisecond);
+            ->Unit(std::string(stage) == "decompose" || std::string(stage) == "command" ? benchmark::kSecond
+                                                                                       : benchmark::kMillisecond);
       }
 }
 

@@ -88,6 +88,10 @@ def ladder_run(parts=("cone", "blade"), sizes=(1, 4, 16), tolerance=1e-3, kinds=
                     "candidates_s": 0.3 * tri_k ** 0.5, "fit_s": 0.5 * tri_k ** 0.5,
                     "cover_s": 0.1, "patches": 1.0, "coverage": 0.99, "lines_scored": 5e4,
                     "tolerance_rel": tolerance, "cutter_kinds": float(kinds)})
+                # The same decompose as its own process: 20% slower inside, and 150 ms around.
+                out["Ladder/command" + base] = (1.2 * 1000.0 * tri_k ** 0.5 * f + 150.0, 0.02, {
+                    "triangles": tri, "decompose_s": 1.2 * tri_k ** 0.5 * f,
+                    "page_faults": 2000.0, "peak_mb": 90.0, "tolerance_rel": tolerance})
     return out
 
 
@@ -408,6 +412,18 @@ class ScalingReportTest(unittest.TestCase):
         slopes = {(r["part"], r["stage"]): r for r in sr.slope_rows(lad)}
         self.assertAlmostEqual(slopes[("cone", "index")]["slope_threads_2"], 1.0)
         self.assertAlmostEqual(slopes[("blade", "decompose: fit+grow")]["slope_threads_1"], 0.5)
+        # The whole command beside the warm loop: what lies outside its own decompose.
+        cmd = {(r["part"], r["tri_k"], r["threads"]): r for r in sr.command_rows(lad)}
+        c = cmd[("cone", 16, 2)]
+        self.assertAlmostEqual(c["decompose_warm_s"], 1.0 * 16 ** 0.5 * 0.55)
+        self.assertAlmostEqual(c["decompose_in_command_s"], 1.2 * 16 ** 0.5 * 0.55)
+        self.assertAlmostEqual(c["outside_decompose_s"], 0.150)
+        self.assertEqual((c["page_faults"], c["peak_mb"]), (2000.0, 90.0))
+        self.assertAlmostEqual(par["Ladder/command/blade/tri_k:1"]["t1_s"], 1.2 + 0.150)
+        # A run without the stage (a baseline from before it) has no rows for it.
+        older = {k: v for k, v in ladder_run().items() if not k.startswith("Ladder/command/")}
+        _, old_benches = sr.load_run(self.write("older.json", gb_json(older)))
+        self.assertEqual(sr.command_rows(sr.ladder(old_benches)), [])
 
     def test_sig3(self):
         self.assertEqual(sr.sig3(0.123456), "0.123")
@@ -434,8 +450,10 @@ class ScalingReportTest(unittest.TestCase):
         self.assertIn("testhost", md)
         with open(os.path.join(out, "summary.json"), encoding="utf-8") as f:
             summary = json.load(f)
-        for section in ("scoring_vs_queries", "parallel", "fit_vs_unavoidable", "slopes"):
+        for section in ("scoring_vs_queries", "parallel", "fit_vs_unavoidable", "command", "slopes"):
             self.assertTrue(summary[section], section)
+        self.assertIn("### The whole command, cold", md)
+        self.assertIn("| cone | 16 | 2 | 2.79 s | 2.64 s | 150 ms | 2.20 s | 2000 | 90 MB |", md)
 
     @unittest.skipUnless(HAVE_MATPLOTLIB, "matplotlib is not installed")
     def test_report_with_the_real_faces(self):
