@@ -1,8 +1,11 @@
 #include "kernels/movability.h"
 
 #include <Eigen/Eigenvalues>
+#include <array>
+#include <atomic>
 #include <cmath>
 #include <memory>
+#include <mutex>
 #include <vector>
 
 namespace flank {
@@ -15,16 +18,30 @@ namespace {
 constexpr int kRangeChecks = 20;
 
 // The profile basis of `kind` at the n samples of a line (rows 0..n−1) and at the range checks
-// (rows n..n + kRangeChecks), made once per thread: every line of a search has the same ones.
+// (rows n..n + kRangeChecks), made once: every line of a search has the same ones, and a run
+// uses a few (kind, n). Shared by the threads and kept for the process, read without a lock.
+// Not a thread_local: a thread's first use of a thread_local with a destructor registers it
+// under the dynamic loader's lock (__cxa_thread_atexit), which waits out a dlopen in progress,
+// the CAD module's that decompose opens meanwhile (50 ms of the 13k cone part's candidates).
 const ProfileTable& sample_table(CutterKind kind, int n) {
-  thread_local std::vector<std::unique_ptr<ProfileTable>> tables;
+  static std::array<std::atomic<const ProfileTable*>, 64> published{};
+  static std::mutex mutex;
+  static std::vector<std::unique_ptr<const ProfileTable>> tables;  // under `mutex`; beyond 64 too
   const std::size_t rows = static_cast<std::size_t>(n) + kRangeChecks + 1;
+  const auto fits = [&](const ProfileTable& t) { return t.kind == kind && t.s.size() == rows; };
+  for (const auto& slot : published) {
+    const ProfileTable* t = slot.load(std::memory_order_acquire);
+    if (!t) break;
+    if (fits(*t)) return *t;
+  }
+  const std::lock_guard lock(mutex);
   for (const auto& t : tables)
-    if (t->kind == kind && t->s.size() == rows) return *t;
+    if (fits(*t)) return *t;
   std::vector<double> s;
   for (int i = 0; i < n; ++i) s.push_back(movability_sample(i, n));
   for (int k = 0; k <= kRangeChecks; ++k) s.push_back(k / static_cast<double>(kRangeChecks));
-  tables.push_back(std::make_unique<ProfileTable>(profile_table(kind, s)));
+  tables.push_back(std::make_unique<const ProfileTable>(profile_table(kind, s)));
+  if (tables.size() <= published.size()) published[tables.size() - 1].store(tables.back().get(), std::memory_order_release);
   return *tables.back();
 }
 

@@ -11,6 +11,8 @@
 #else
 #include <algorithm>
 #include <atomic>
+#include <cstdint>
+#include <stdexcept>
 #include <vector>
 
 #include <tbb/blocked_range.h>
@@ -249,18 +251,30 @@ namespace {
 // Runs its function once on each worker thread, when the thread first enters the scheduler.
 class FirstEntry : public tbb::task_scheduler_observer {
  public:
-  explicit FirstEntry(std::function<void()> f) : f_(std::move(f)) { observe(true); }
+  explicit FirstEntry(std::function<void()> f) : f_(std::move(f)), bit_(std::uint64_t{1} << next_bit()) {
+    observe(true);
+  }
   void on_scheduler_entry(bool is_worker) override {
     if (!is_worker) return;
-    // Per observer: a thread that entered for one has yet to enter for another.
-    thread_local std::vector<const FirstEntry*> entered;
-    if (std::find(entered.begin(), entered.end(), this) != entered.end()) return;
-    entered.push_back(this);
+    // Per observer: a thread that entered for one has yet to enter for another. A thread's
+    // record is a trivially destructible thread_local: the first use of one with a destructor
+    // (a vector) registers it under the dynamic loader's lock (__cxa_thread_atexit), and waits
+    // out any dlopen in progress, the CAD module's among them.
+    thread_local std::uint64_t entered = 0;
+    if (entered & bit_) return;
+    entered |= bit_;
     f_();
   }
 
  private:
+  static int next_bit() {
+    static std::atomic<int> next{0};
+    const int bit = next++;
+    if (bit >= 64) throw std::logic_error("on_each_worker_thread: more than 64 functions");
+    return bit;
+  }
   std::function<void()> f_;
+  std::uint64_t bit_;
 };
 }  // namespace
 
