@@ -73,6 +73,7 @@ int run_decompose(const DecomposeArgs& a) {
 
   ThreadLimit limit(a.threads);
   start_worker_threads();  // while the input is read
+  io::preload_cad_module();  // patches.step and tools.step need Open CASCADE: opened meanwhile
   const Design design = read_design(a, progress);
   const io::LoadedMesh& lm = design.lm;
   const double t_index = progress.elapsed();

@@ -72,6 +72,7 @@ int run_fit(const FitArgs& a) {
   const std::unique_ptr<io::OutputSet> out = open_outputs(a);  // checked before any work
   ThreadLimit limit(a.threads);
   start_worker_threads();  // while the input is read
+  io::preload_cad_module();  // patches.step and tools.step need Open CASCADE: opened meanwhile
   const Design design = read_design(a, progress);
   const io::LoadedMesh& lm = design.lm;
   const double t_index = progress.elapsed();

@@ -283,6 +283,9 @@ void write_outputs(io::OutputSet& out, const PatchArgs& a, const Design& design,
   const std::string stem = std::filesystem::path(a.mesh).stem().string();
   const std::vector<std::function<void()>> writers{
       [&] {
+        // Waits for the CAD module if it is still being opened; if it cannot be, the one line
+        // names the file a user asked for, not its staged copy.
+        io::require_cad_module((std::filesystem::path(a.out_dir) / "patches.step").string());
         for (const report::WrittenFace& f : report::write_patches_step(out.staged("patches.step"), patches, tolerance))
           run.nurbs.push_back({f.deviation, f.domain.t0, f.domain.t1, f.domain.s0, f.domain.s1});
         report::write_tools_step(out.staged("tools.step"), patches);

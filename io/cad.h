@@ -1,6 +1,7 @@
-// CAD files through Open CASCADE, kept out of this header: STEP and IGES B-rep parts read,
-// their faces listed and tessellated into one sewn mesh; B-spline surfaces fitted to grids of
-// points and written as named STEP or IGES faces; solids of revolution written as STEP.
+// CAD files through Open CASCADE, kept out of this header and out of the program (a module
+// opened when first needed): STEP and IGES B-rep parts read, their faces listed and
+// tessellated into one sewn mesh; B-spline surfaces fitted to grids of points and written as
+// named STEP or IGES faces; solids of revolution written as STEP.
 #pragma once
 
 #include <cstdint>
@@ -33,6 +34,14 @@ struct CadTessellation {
   double deviation = 0.0;  // the largest chord deviation measured: mesh to B-rep faces, mm
   int faces = 0;           // faces tessellated
 };
+
+// Open CASCADE is loaded (the CAD module, io/cad_module.h) when a STEP or IGES file is first
+// read or written. A command that will write one calls this first: the module is then opened
+// on a thread of its own while the command works (80 ms of OCCT's libraries on this machine).
+void preload_cad_module();
+// Waits for the module if it is being opened, opens it if not; throws io::Error("NAME: why")
+// when it cannot be opened.
+void require_cad_module(const std::string& name);
 
 // A B-rep part: the faces of a STEP or IGES file.
 class CadPart {

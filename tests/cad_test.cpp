@@ -46,6 +46,28 @@ using testing::slurp;
 
 class CadIo : public Cli {};
 
+// Whether Open CASCADE's kernel library is mapped into this process.
+bool occt_mapped() {
+  std::ifstream maps("/proc/self/maps");
+  for (std::string line; std::getline(maps, line);)
+    if (line.find("libTKernel") != std::string::npos) return true;
+  return false;
+}
+// Read before main, before any test could open the CAD module.
+const bool kOcctBeforeMain = occt_mapped();
+
+// The programs (this one links flank_io as flank does) start without Open CASCADE: it comes
+// with the CAD module, opened on a thread of its own by preload or on first use.
+TEST(CadModule, OpenCascadeComesWithTheModuleNotWithTheProgram) {
+  EXPECT_FALSE(kOcctBeforeMain);
+  io::preload_cad_module();
+  io::preload_cad_module();  // a second call neither waits nor opens it again
+  const io::SplineSurface s = io::SplineSurface::fit("cylinder", cylinder_grid(6, 6), 11, 11, 0.0);
+  EXPECT_TRUE(occt_mapped());
+  EXPECT_NEAR(s.point(0.0, 0.0).x(), 10.0, 1e-9);
+  io::require_cad_module("again");
+}
+
 TEST_F(CadIo, SplineSurfaceFollowsTheExactSurfaceBetweenItsPoints) {
   const report::FittedSurface f = report::fit_exact_grid("cylinder", cylinder_grid(20, 6), 20, 6, 1e-7);
   // Measured at the grid points, edge midpoints and cell centres against the exact cylinder.
@@ -398,6 +420,31 @@ TEST_F(CadIo, CommandLineRefusesBadCadAndListsFaces) {
   const cli_test::CliRun mesh_faces = cli_test::run("decompose " + (dir_ / "bad.stl").string() + " --faces 1 -o " +
                                                     (dir_ / "o").string());
   EXPECT_EQ(mesh_faces.code, 2);
+}
+
+// An installation without the CAD module (libflank_cad.so lost): what needs no CAD runs; a
+// STEP input, and decompose's patches.step, are refused in one line naming the file and the
+// module, with nothing written.
+TEST_F(CadIo, CommandLineWithoutTheModuleRefusesOnlyCad) {
+  const report::FittedSurface f = report::fit_exact_grid("cylinder", cylinder_grid(20, 6), 20, 6, 1e-7);
+  io::write_surfaces(dir_ / "part.step", {{"face", f.surface}});
+  const fs::path mesh = dir_ / "cone.stl";
+  ASSERT_EQ(cli_test::run("synth --guides seed003 --tool cone:4,7 --resolution 121x31 -o " + mesh.string()).code, 0);
+  ::setenv("FLANK_CAD_MODULE", (dir_ / "missing" / "libflank_cad.so").c_str(), 1);
+  struct Unset {
+    ~Unset() { ::unsetenv("FLANK_CAD_MODULE"); }
+  } unset;
+  EXPECT_EQ(cli_test::run("info " + mesh.string()).code, 0);
+  EXPECT_EQ(cli_test::run("movability " + mesh.string() + " " + cli_test::kLine).code, 0);
+  const fs::path out = dir_ / "out";
+  const cli_test::CliRun r = cli_test::run("decompose " + mesh.string() + " --tool cone -q -o " + out.string());
+  EXPECT_EQ(r.code, 2);
+  expect_clean_failure(r, (out / "patches.step").string() + ": ", out);
+  EXPECT_NE(r.err.find("libflank_cad.so"), std::string::npos) << r.err;
+  const cli_test::CliRun info = cli_test::run("info " + (dir_ / "part.step").string());
+  EXPECT_EQ(info.code, 2);
+  expect_clean_failure(info, (dir_ / "part.step").string() + ": ", out);
+  EXPECT_NE(info.err.find("libflank_cad.so"), std::string::npos) << info.err;
 }
 
 // A real run: patches.step read back agrees with envelopes.ply and with Ω rebuilt from

@@ -1,0 +1,559 @@
+// The CAD module (libflank_cad.so): all of flank's Open CASCADE code, opened by io/cad.cpp
+// through the table of io/cad_module.h. Every OCCT exception becomes io::Error with the file's
+// name; OCCT's own console messages are switched off, so a bad file gives one line and nothing else.
+#include "io/cad_module.h"
+
+
+#include <BRepAdaptor_Surface.hxx>
+#include <BRepBndLib.hxx>
+#include <BRepBuilderAPI_MakeEdge.hxx>
+#include <BRepBuilderAPI_MakeFace.hxx>
+#include <BRepBuilderAPI_MakeVertex.hxx>
+#include <BRepExtrema_DistShapeShape.hxx>
+#include <BRepBuilderAPI_MakeWire.hxx>
+#include <BRepBuilderAPI_Sewing.hxx>
+#include <BRepGProp.hxx>
+#include <BRepMesh_IncrementalMesh.hxx>
+#include <BRepPrimAPI_MakeRevol.hxx>
+#include <BRep_Builder.hxx>
+#include <BRep_Tool.hxx>
+#include <Bnd_Box.hxx>
+#include <GProp_GProps.hxx>
+#include <GeomAPI_Interpolate.hxx>
+#include <GeomAPI_PointsToBSplineSurface.hxx>
+#include <Geom_BSplineSurface.hxx>
+#include <Geom_Surface.hxx>
+#include <IGESCAFControl_Reader.hxx>
+#include <IGESCAFControl_Writer.hxx>
+#include <IGESControl_Controller.hxx>
+#include <Interface_Static.hxx>
+#include <Message.hxx>
+#include <Message_Messenger.hxx>
+#include <Message_PrinterOStream.hxx>
+#include <Poly_Triangulation.hxx>
+#include <STEPCAFControl_Reader.hxx>
+#include <STEPCAFControl_Writer.hxx>
+#include <STEPControl_Controller.hxx>
+#include <Standard_Failure.hxx>
+#include <TColStd_Array1OfInteger.hxx>
+#include <TColStd_Array1OfReal.hxx>
+#include <TColgp_Array2OfPnt.hxx>
+#include <TColgp_HArray1OfPnt.hxx>
+#include <TDF_Label.hxx>
+#include <TDF_LabelSequence.hxx>
+#include <TDataStd_Name.hxx>
+#include <TDocStd_Document.hxx>
+#include <TopExp.hxx>
+#include <TopExp_Explorer.hxx>
+#include <TopLoc_Location.hxx>
+#include <TopTools_IndexedMapOfShape.hxx>
+#include <TopoDS.hxx>
+#include <TopoDS_Compound.hxx>
+#include <TopoDS_Face.hxx>
+#include <XCAFApp_Application.hxx>
+#include <XCAFDoc_DocumentTool.hxx>
+#include <XCAFDoc_ShapeTool.hxx>
+#include <gp_Ax1.hxx>
+#include <gp_Pln.hxx>
+
+
+#include <unistd.h>
+
+#include <algorithm>
+#include <cmath>
+#include <cstdio>
+#include <cstdlib>
+#include <fstream>
+#include <mutex>
+#include <sstream>
+
+#include "io/encode.h"
+#include "io/read_mesh.h"  // io::Error
+
+namespace flank::io::cad_module {
+
+struct Shape {
+  TopoDS_Shape shape;
+  TopTools_IndexedMapOfShape face_map;  // 1-based
+};
+
+struct Surface {
+  Handle(Geom_BSplineSurface) surface;
+};
+
+namespace {
+
+namespace fs = std::filesystem;
+
+[[noreturn]] void fail(const std::string& name, const std::string& problem) {
+  throw Error(name + ": " + problem);
+}
+
+// OCCT reports through a global messenger that prints to stdout; flank's messages are its own.
+void quiet_occt() {
+  static std::once_flag once;
+  std::call_once(once, [] {
+    const Handle(Message_Messenger)& messenger = Message::DefaultMessenger();
+    messenger->RemovePrinters(STANDARD_TYPE(Message_PrinterOStream));
+    STEPControl_Controller::Init();
+    IGESControl_Controller::Init();
+  });
+}
+
+std::string what_of(const Standard_Failure& e) {
+  const char* message = e.GetMessageString();
+  std::string text = message && *message ? message : e.DynamicType()->Name();
+  return one_line(text);
+}
+
+// Runs an OCCT step; an OCCT exception becomes io::Error("NAME: doing: message").
+template <class F>
+auto guarded(const std::string& name, const std::string& doing, F&& f) {
+  try {
+    return f();
+  } catch (const Error&) {
+    throw;
+  } catch (const Standard_Failure& e) {
+    fail(name, doing + ": " + what_of(e));
+  } catch (const std::exception& e) {
+    fail(name, doing + ": " + one_line(e.what()));
+  }
+}
+
+Vec3 vec(const gp_Pnt& p) { return {p.X(), p.Y(), p.Z()}; }
+gp_Pnt pnt(const Vec3& p) { return {p.x(), p.y(), p.z()}; }
+
+std::string surface_kind(const TopoDS_Face& face) {
+  switch (BRepAdaptor_Surface(face).GetType()) {
+    case GeomAbs_Plane: return "plane";
+    case GeomAbs_Cylinder: return "cylinder";
+    case GeomAbs_Cone: return "cone";
+    case GeomAbs_Sphere: return "sphere";
+    case GeomAbs_Torus: return "torus";
+    case GeomAbs_BezierSurface: return "bezier";
+    case GeomAbs_BSplineSurface: return "bspline";
+    case GeomAbs_SurfaceOfRevolution: return "revolution";
+    case GeomAbs_SurfaceOfExtrusion: return "extrusion";
+    case GeomAbs_OffsetSurface: return "offset";
+    default: return "other";
+  }
+}
+
+// An XCAF document, closed when it goes out of scope: the application keeps every open
+// document (and its shapes) alive until it is closed.
+class Document {
+ public:
+  Document() { XCAFApp_Application::GetApplication()->NewDocument("MDTV-XCAF", doc_); }
+  ~Document() {
+    if (!doc_.IsNull() && doc_->IsOpened()) XCAFApp_Application::GetApplication()->Close(doc_);
+  }
+  Document(const Document&) = delete;
+  Document& operator=(const Document&) = delete;
+  Handle(TDocStd_Document)& get() { return doc_; }
+
+ private:
+  Handle(TDocStd_Document) doc_;
+};
+
+std::string label_name(const TDF_Label& label) {
+  Handle(TDataStd_Name) name;
+  if (!label.FindAttribute(TDataStd_Name::GetID(), name)) return {};
+  const TCollection_ExtendedString& text = name->Get();
+  std::string out;
+  for (int k = 1; k <= text.Length(); ++k) {
+    const auto c = static_cast<unsigned>(text.Value(k));
+    out += c < 0x80 ? static_cast<char>(c) : '?';
+  }
+  return one_line(out);
+}
+
+std::shared_ptr<const Shape> read(const std::string& path, bool step, std::vector<CadFace>& faces,
+                                  std::vector<std::string>& names) {
+  quiet_occt();
+  auto impl = std::make_shared<Shape>();
+
+  Document document;
+  Handle(TDocStd_Document)& doc = document.get();
+  guarded(path, std::string("reading ") + (step ? "STEP" : "IGES"), [&] {
+    // Read, then transfer: a file OCCT parses but that holds no shape has no faces.
+    bool read = false, transferred = false;
+    if (step) {
+      STEPCAFControl_Reader reader;
+      reader.SetNameMode(true);
+      read = reader.ReadFile(path.c_str()) == IFSelect_RetDone;
+      transferred = read && reader.Transfer(doc);
+    } else {
+      IGESCAFControl_Reader reader;
+      reader.SetNameMode(true);
+      read = reader.ReadFile(path.c_str()) == IFSelect_RetDone;
+      transferred = read && reader.Transfer(doc);
+    }
+    if (!read) fail(path, std::string("not a readable ") + (step ? "STEP" : "IGES") + " file");
+    if (!transferred) fail(path, std::string("no faces in this ") + (step ? "STEP" : "IGES") + " file (no shape to read)");
+    return 0;
+  });
+
+  Handle(XCAFDoc_ShapeTool) shapes = XCAFDoc_DocumentTool::ShapeTool(doc->Main());
+  TDF_LabelSequence roots;
+  shapes->GetFreeShapes(roots);
+  TopoDS_Compound all;
+  BRep_Builder builder;
+  builder.MakeCompound(all);
+  std::vector<std::pair<TopoDS_Shape, std::string>> named;
+  for (int k = 1; k <= roots.Length(); ++k) {
+    const TopoDS_Shape s = XCAFDoc_ShapeTool::GetShape(roots.Value(k));
+    if (s.IsNull()) continue;
+    builder.Add(all, s);
+    named.emplace_back(s, label_name(roots.Value(k)));
+  }
+  impl->shape = all;
+  TopExp::MapShapes(all, TopAbs_FACE, impl->face_map);
+  const int n = impl->face_map.Extent();
+  if (n == 0) fail(path, std::string("no faces in this ") + (step ? "STEP" : "IGES") + " file");
+  names.assign(static_cast<std::size_t>(n), "");
+  for (const auto& [s, name] : named)
+    for (TopExp_Explorer e(s, TopAbs_FACE); e.More(); e.Next()) {
+      const int index = impl->face_map.FindIndex(e.Current());
+      if (index > 0 && names[index - 1].empty()) names[index - 1] = name;
+    }
+  guarded(path, "measuring faces", [&] {
+    for (int i = 1; i <= n; ++i) {
+      const TopoDS_Face& face = TopoDS::Face(impl->face_map(i));
+      CadFace f;
+      f.index = i;
+      f.surface = surface_kind(face);
+      GProp_GProps props;
+      BRepGProp::SurfaceProperties(face, props);
+      f.area = props.Mass();
+      Bnd_Box box;
+      BRepBndLib::AddOptimal(face, box, /*useTriangulation=*/false, /*useShapeTolerance=*/false);
+      if (!box.IsVoid()) {
+        double x0, y0, z0, x1, y1, z1;
+        box.Get(x0, y0, z0, x1, y1, z1);
+        f.min = {x0, y0, z0};
+        f.max = {x1, y1, z1};
+      }
+      if (!f.min.allFinite() || !f.max.allFinite() || !std::isfinite(f.area))
+        fail(path, "face " + std::to_string(i) + " is unbounded or has non-finite geometry");
+      faces.push_back(std::move(f));
+    }
+    return 0;
+  });
+  return impl;
+}
+
+
+void tessellate(const Shape& shape, const std::string& path, const std::vector<int>& faces, double sew,
+                double deviation, std::vector<double>& xyz, std::vector<int>& triangles, double& measured) {
+  measured = 0.0;
+  guarded(path, "tessellating", [&] {
+    // Sewn first, so that faces meeting along an edge share its points; a copy, the part
+    // itself stays as read.
+    BRepBuilderAPI_Sewing sewing(sew);
+    for (const int i : faces) sewing.Add(shape.face_map(i));
+    sewing.Perform();
+    TopoDS_Shape sewn = sewing.SewedShape();
+    if (sewn.IsNull()) fail(path, "sewing the faces gave no shape");
+    BRepMesh_IncrementalMesh mesher(sewn, deviation, /*isRelative=*/false, /*angle=*/0.5,
+                                    /*inParallel=*/false);
+    if (!mesher.IsDone()) fail(path, "tessellation failed");
+    for (TopExp_Explorer e(sewn, TopAbs_FACE); e.More(); e.Next()) {
+      const TopoDS_Face& face = TopoDS::Face(e.Current());
+      TopLoc_Location loc;
+      const Handle(Poly_Triangulation) tri = BRep_Tool::Triangulation(face, loc);
+      if (tri.IsNull()) continue;
+      const gp_Trsf trsf = loc.Transformation();
+      const int base = static_cast<int>(xyz.size() / 3);
+      for (int k = 1; k <= tri->NbNodes(); ++k) {
+        const gp_Pnt p = tri->Node(k).Transformed(trsf);
+        xyz.insert(xyz.end(), {p.X(), p.Y(), p.Z()});
+      }
+      const bool reversed = face.Orientation() == TopAbs_REVERSED;
+      BRepAdaptor_Surface surface(face);
+      for (int k = 1; k <= tri->NbTriangles(); ++k) {
+        int n1, n2, n3;
+        tri->Triangle(k).Get(n1, n2, n3);
+        if (reversed) std::swap(n2, n3);
+        triangles.insert(triangles.end(), {base + n1 - 1, base + n2 - 1, base + n3 - 1});
+        if (!tri->HasUVNodes()) continue;
+        // The chord deviation: the surface at the triangle's centre and edge midpoints (in
+        // the face's parameters) against the flat triangle there.
+        const int node[3] = {n1, n2, n3};
+        const double w[4][3] = {{1 / 3.0, 1 / 3.0, 1 / 3.0}, {0.5, 0.5, 0}, {0, 0.5, 0.5}, {0.5, 0, 0.5}};
+        for (const auto& wk : w) {
+          gp_XY uv(0, 0);
+          gp_XYZ flat(0, 0, 0);
+          for (int c = 0; c < 3; ++c) {
+            uv += wk[c] * tri->UVNode(node[c]).XY();
+            flat += wk[c] * tri->Node(node[c]).Transformed(trsf).XYZ();
+          }
+          const gp_Pnt on = surface.Value(uv.X(), uv.Y());
+          measured = std::max(measured, on.Distance(gp_Pnt(flat)));
+        }
+      }
+    }
+    return 0;
+  });
+}
+
+Vec3 face_point(const Shape& shape, const std::string& path, int index, double u, double v) {
+  return guarded(path, "evaluating face " + std::to_string(index), [&] {
+    const TopoDS_Face& face = TopoDS::Face(shape.face_map(index));
+    const BRepAdaptor_Surface s(face, /*restriction=*/false);
+    const double u0 = s.FirstUParameter(), u1 = s.LastUParameter();
+    const double v0 = s.FirstVParameter(), v1 = s.LastVParameter();
+    return vec(s.Value(u0 + u * (u1 - u0), v0 + v * (v1 - v0)));
+  });
+}
+
+double distance(const Shape& shape, const std::string& path, const Vec3& p) {
+  return guarded(path, "measuring a distance", [&] {
+    BRepExtrema_DistShapeShape d(BRepBuilderAPI_MakeVertex(pnt(p)).Vertex(), shape.shape);
+    if (!d.IsDone() || d.NbSolution() == 0) fail(path, "no distance from a point to the faces");
+    return d.Value();
+  });
+}
+
+// ---------------------------------------------------------------------------------------
+// Writing
+
+std::shared_ptr<const Surface> fit(const std::string& name, const Points& grid, int rows, int cols,
+                                   double tolerance) {
+  quiet_occt();
+  if (rows < 4 || cols < 4 || grid.rows() != static_cast<Eigen::Index>(rows) * cols || !grid.allFinite())
+    fail(name, "a B-spline surface needs a finite grid of at least 4 × 4 points");
+  return guarded(name, "fitting a B-spline surface", [&] {
+    TColgp_Array2OfPnt points(1, rows, 1, cols);
+    for (int i = 0; i < rows; ++i)
+      for (int j = 0; j < cols; ++j)
+        points.SetValue(i + 1, j + 1, pnt(grid.row(static_cast<Eigen::Index>(i) * cols + j).transpose()));
+    GeomAPI_PointsToBSplineSurface approx;
+    if (tolerance > 0)
+      approx.Init(points, Approx_IsoParametric, 3, 8, GeomAbs_C2, tolerance);
+    else
+      approx.Interpolate(points, Approx_IsoParametric);
+    if (!approx.IsDone() || approx.Surface().IsNull()) fail(name, "no B-spline surface within the tolerance");
+    auto impl = std::make_shared<Surface>();
+    impl->surface = approx.Surface();
+    return std::shared_ptr<const Surface>(std::move(impl));
+  });
+}
+
+std::shared_ptr<const Surface> from_poles(const std::string& name, const Points& poles, int nu, int nv,
+                                          const std::vector<double>& knots_u, const std::vector<double>& knots_v) {
+  quiet_occt();
+  if (nu < 4 || nv < 4 || poles.rows() != static_cast<Eigen::Index>(nu) * nv || !poles.allFinite() ||
+      knots_u.size() != static_cast<std::size_t>(nu + 4) || knots_v.size() != static_cast<std::size_t>(nv + 4))
+    fail(name, "a cubic B-spline surface needs at least 4 × 4 finite poles and clamped knots");
+  // OCCT takes distinct knots with multiplicities.
+  auto distinct = [](const std::vector<double>& knots, TColStd_Array1OfReal*& values, TColStd_Array1OfInteger*& mults) {
+    std::vector<double> v;
+    std::vector<int> m;
+    for (const double k : knots) {
+      if (!v.empty() && k == v.back()) {
+        ++m.back();
+      } else {
+        v.push_back(k);
+        m.push_back(1);
+      }
+    }
+    values = new TColStd_Array1OfReal(1, static_cast<int>(v.size()));
+    mults = new TColStd_Array1OfInteger(1, static_cast<int>(v.size()));
+    for (std::size_t i = 0; i < v.size(); ++i) {
+      values->SetValue(static_cast<int>(i + 1), v[i]);
+      mults->SetValue(static_cast<int>(i + 1), m[i]);
+    }
+  };
+  return guarded(name, "building a B-spline surface", [&] {
+    TColgp_Array2OfPnt array(1, nu, 1, nv);
+    for (int i = 0; i < nu; ++i)
+      for (int j = 0; j < nv; ++j)
+        array.SetValue(i + 1, j + 1, pnt(poles.row(static_cast<Eigen::Index>(i) * nv + j).transpose()));
+    TColStd_Array1OfReal *ku = nullptr, *kv = nullptr;
+    TColStd_Array1OfInteger *mu = nullptr, *mv = nullptr;
+    distinct(knots_u, ku, mu);
+    distinct(knots_v, kv, mv);
+    const std::unique_ptr<TColStd_Array1OfReal> hold_ku(ku), hold_kv(kv);
+    const std::unique_ptr<TColStd_Array1OfInteger> hold_mu(mu), hold_mv(mv);
+    auto impl = std::make_shared<Surface>();
+    impl->surface = new Geom_BSplineSurface(array, *ku, *kv, *mu, *mv, 3, 3);
+    return std::shared_ptr<const Surface>(std::move(impl));
+  });
+}
+
+Vec3 point(const Surface& s, double u, double v) {
+  double u0, u1, v0, v1;
+  s.surface->Bounds(u0, u1, v0, v1);
+  return vec(s.surface->Value(u0 + u * (u1 - u0), v0 + v * (v1 - v0)));
+}
+
+void size(const Surface& s, int& poles_u, int& poles_v, int& degree_u, int& degree_v) {
+  poles_u = s.surface->NbUPoles();
+  poles_v = s.surface->NbVPoles();
+  degree_u = s.surface->UDegree();
+  degree_v = s.surface->VDegree();
+}
+
+// The bytes of the named shapes of `doc` as STEP or IGES (by extension), written through a
+// temporary file; io/cad.cpp moves them into place with write_file_atomic.
+std::string document_bytes(const fs::path& path, const Handle(TDocStd_Document)& doc) {
+  const std::string name = path.string();
+  const std::string ext = lower_extension(path);
+  const bool step = ext == ".step" || ext == ".stp";  // else IGES (io/cad.cpp checked)
+  // OCCT writes to a path; the bytes go through flank's atomic writer so that the output set
+  // stays all or nothing. The scratch file is private (mkstemp) and removed.
+  std::string scratch_path =
+      (fs::temp_directory_path() / (step ? "flank-cad-XXXXXX.step" : "flank-cad-XXXXXX.igs")).string();
+  const int fd = mkstemps(scratch_path.data(), step ? 5 : 4);
+  if (fd < 0) fail(name, "cannot create a scratch file in " + fs::temp_directory_path().string());
+  ::close(fd);
+  struct Remove {
+    std::string p;
+    ~Remove() { std::remove(p.c_str()); }
+  } remove{scratch_path};
+  guarded(name, std::string("writing ") + (step ? "STEP" : "IGES"), [&] {
+    bool done = false;
+    if (step) {
+      Interface_Static::SetCVal("write.step.schema", "AP214IS");
+      Interface_Static::SetCVal("write.step.unit", "MM");
+      STEPCAFControl_Writer writer;
+      writer.SetNameMode(true);
+      done = writer.Transfer(doc, STEPControl_AsIs) && writer.Write(scratch_path.c_str()) == IFSelect_RetDone;
+    } else {
+      Interface_Static::SetCVal("write.iges.unit", "MM");
+      Interface_Static::SetIVal("write.iges.brep.mode", 1);
+      IGESCAFControl_Writer writer;
+      writer.SetNameMode(true);
+      done = writer.Transfer(doc) && writer.Write(scratch_path.c_str());
+    }
+    if (!done) fail(name, "OCCT could not write the file");
+    return 0;
+  });
+  std::ifstream in(scratch_path, std::ios::binary);
+  std::ostringstream bytes;
+  bytes << in.rdbuf();
+  if (!in) fail(name, "cannot read back the scratch file");
+  std::string text = bytes.str();
+  // Headers carry the scratch file's name and the time of writing: the output's own name and
+  // a fixed stamp keep the bytes deterministic.
+  if (step) {
+    const std::size_t at = text.find("FILE_NAME(");
+    const std::size_t q1 = at == std::string::npos ? at : text.find('\'', at);
+    const std::size_t q2 = q1 == std::string::npos ? q1 : text.find('\'', q1 + 1);
+    const std::size_t q3 = q2 == std::string::npos ? q2 : text.find('\'', q2 + 1);
+    const std::size_t q4 = q3 == std::string::npos ? q3 : text.find('\'', q3 + 1);
+    if (q4 != std::string::npos) {
+      text.replace(q3, q4 - q3 + 1, "'1970-01-01T00:00:00'");
+      text.replace(q1, q2 - q1 + 1, "'" + one_line(path.filename().string()) + "'");
+    }
+  } else {
+    // The global section (column 73 'G') holds the file name and two dates "15HYYYYMMDD.HHNNSS".
+    std::size_t line = 0;
+    while (line < text.size()) {
+      std::size_t end = text.find('\n', line);
+      if (end == std::string::npos) end = text.size();
+      if (end - line >= 73 && text[line + 72] == 'G') {
+        for (std::size_t at = text.find("15H", line); at != std::string::npos && at + 18 <= end;
+             at = text.find("15H", at + 3)) {
+          const std::string stamp = text.substr(at + 3, 15);
+          if (stamp.size() == 15 && stamp[8] == '.' &&
+              std::all_of(stamp.begin(), stamp.begin() + 8, [](char c) { return c >= '0' && c <= '9'; }))
+            text.replace(at + 3, 15, "19700101.000000");
+        }
+        const std::size_t scratch_at = text.find(scratch_path, line);
+        if (scratch_at != std::string::npos && scratch_at < end) fail(name, "IGES header names the scratch file");
+      }
+      line = end + 1;
+    }
+  }
+  return text;
+}
+
+void add_named(const Handle(TDocStd_Document)& doc, const TopoDS_Shape& shape, const std::string& name) {
+  Handle(XCAFDoc_ShapeTool) shapes = XCAFDoc_DocumentTool::ShapeTool(doc->Main());
+  const TDF_Label label = shapes->AddShape(shape, /*makeAssembly=*/false);
+  TDataStd_Name::Set(label, TCollection_ExtendedString(name.c_str()));
+}
+
+std::string surfaces_file(const std::string& path, const std::vector<std::pair<std::string, const Surface*>>& surfaces) {
+  quiet_occt();
+  const std::string& name = path;
+  Document document;
+  Handle(TDocStd_Document)& doc = document.get();
+  guarded(name, "building faces", [&] {
+    for (const auto& [face_name, surface] : surfaces) {
+      BRepBuilderAPI_MakeFace face(surface->surface, 1e-7);
+      if (!face.IsDone()) fail(name, "cannot make a face of surface '" + one_line(face_name) + "'");
+      add_named(doc, face.Face(), face_name);
+    }
+    return 0;
+  });
+  return document_bytes(path, doc);
+}
+
+std::string solids_file(const std::string& path, const std::vector<RevolvedSolid>& solids) {
+  quiet_occt();
+  const std::string& name = path;
+  Document document;
+  Handle(TDocStd_Document)& doc = document.get();
+  guarded(name, "building solids", [&] {
+    for (const RevolvedSolid& s : solids) {
+      const auto n = s.meridian.size();
+      if (n < 2) fail(name, "solid '" + one_line(s.name) + "' has fewer than 2 meridian points");
+      for (std::size_t k = 0; k < n; ++k) {
+        if (!s.meridian[k].allFinite() || s.meridian[k].y() <= 0 ||
+            (k > 0 && !(s.meridian[k].x() > s.meridian[k - 1].x())))
+          fail(name, "solid '" + one_line(s.name) + "': meridian point " + std::to_string(k) +
+                         " is not finite, not off the axis, or not past the previous one");
+      }
+      const Vec3 axis = s.axis.normalized();
+      // A unit vector normal to the axis: the meridian's radial direction.
+      Vec3 radial = axis.unitOrthogonal();
+      auto at = [&](double x, double r) { return pnt(s.origin + x * axis + r * radial); };
+      // The side: an interpolating cubic through the meridian points (exact for a line).
+      Handle(TColgp_HArray1OfPnt) side = new TColgp_HArray1OfPnt(1, static_cast<int>(n));
+      for (std::size_t k = 0; k < n; ++k) side->SetValue(static_cast<int>(k + 1), at(s.meridian[k].x(), s.meridian[k].y()));
+      GeomAPI_Interpolate interpolate(side, /*periodic=*/false, 1e-9);
+      interpolate.Perform();
+      if (!interpolate.IsDone()) fail(name, "solid '" + one_line(s.name) + "': cannot interpolate the meridian");
+      const gp_Pnt tip_axis = at(s.meridian.front().x(), 0), end_axis = at(s.meridian.back().x(), 0);
+      BRepBuilderAPI_MakeWire wire;
+      wire.Add(BRepBuilderAPI_MakeEdge(tip_axis, side->Value(1)).Edge());
+      wire.Add(BRepBuilderAPI_MakeEdge(interpolate.Curve()).Edge());
+      wire.Add(BRepBuilderAPI_MakeEdge(side->Value(static_cast<int>(n)), end_axis).Edge());
+      wire.Add(BRepBuilderAPI_MakeEdge(end_axis, tip_axis).Edge());
+      if (!wire.IsDone()) fail(name, "solid '" + one_line(s.name) + "': the meridian does not close");
+      BRepBuilderAPI_MakeFace profile(wire.Wire(), /*onlyPlane=*/true);
+      if (!profile.IsDone()) fail(name, "solid '" + one_line(s.name) + "': the meridian is not planar");
+      BRepPrimAPI_MakeRevol revol(profile.Face(), gp_Ax1(pnt(s.origin), gp_Dir(axis.x(), axis.y(), axis.z())));
+      revol.Build();
+      if (!revol.IsDone()) fail(name, "solid '" + one_line(s.name) + "': the revolution failed");
+      add_named(doc, revol.Shape(), s.name);
+    }
+    return 0;
+  });
+  return document_bytes(path, doc);
+}
+
+
+const Api kApi = [] {
+  Api api;
+  api.version = kVersion;
+  api.read = read;
+  api.tessellate = tessellate;
+  api.face_point = face_point;
+  api.distance = distance;
+  api.fit = fit;
+  api.from_poles = from_poles;
+  api.point = point;
+  api.size = size;
+  api.surfaces_file = surfaces_file;
+  api.solids_file = solids_file;
+  return api;
+}();
+
+}  // namespace
+
+}  // namespace flank::io::cad_module
+
+const flank::io::cad_module::Api* flank_cad_module() { return &flank::io::cad_module::kApi; }
