@@ -59,6 +59,15 @@ void expect(bool promise) {
 
 }  // namespace
 
+#if defined(FLANK_FUZZ_STEP) || defined(FLANK_FUZZ_IGES)
+// The CAD module (Open CASCADE's readers) opened before the first input, so that its coverage
+// counters are libFuzzer's from the start.
+extern "C" int LLVMFuzzerInitialize(int*, char***) {
+  flank::io::require_cad_module(kName);
+  return 0;
+}
+#endif
+
 extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size) {
   const std::string_view bytes(reinterpret_cast<const char*>(data), size);
   try {
