@@ -776,12 +776,12 @@ def build_markdown(title, run_path, context, benches, base_path, base, lad):
     if commands:
         out += ["", "### The whole command, cold", "",
                 "`flank decompose FILE` in a process of its own, timed from outside: starting "
-                "(loading the libraries: Open CASCADE's took 80 ms of a 90 ms start on the 2-core machines "
-                "of issue 13), reading the file, "
+                "(loading the libraries), reading the file, "
                 "decompose, writing every output. Its decompose is the time the process reports "
                 "in patches.json; the warm loop is this run's decompose stage on the same mesh, "
                 "repeated in one long process. The difference between those two is what a cold "
-                "process pays (threads created, pages faulted in afresh).", ""]
+                "process pays (threads created, pages faulted in afresh, and, at two threads, "
+                "the core that the thread opening the CAD module, Open CASCADE, takes meanwhile).", ""]
         out.append(md_table(
             ["part", "tri_k", "threads", "command", "its decompose", "the rest",
              "decompose, warm loop", "page faults", "peak memory"],
