@@ -237,6 +237,8 @@ FittedSurface to_surface(const std::string& name, const PoleGrid& g) {
 
 }  // namespace
 
+bool denser_grids_may_help(double before, std::optional<double> now) { return now && *now <= 0.5 * before; }
+
 FaceBreaks face_breaks(const Patch& p) {
   FaceBreaks b;
   for (const double k : p.motion.knots)
@@ -386,7 +388,8 @@ std::vector<WrittenFace> write_patches_step(const std::filesystem::path& path, c
       // Ω's grid in the evaluation's (t, s) samples, then up to eight times as many rows and
       // columns (more points to hold more knots, where the face needs more poles than four
       // fifths of the grid's points), until the face is within 1/150 of the tolerance (a
-      // margin under the 1% promised); else the closest. Where Ω ends inside the grid, a face
+      // margin under the 1% promised), while denser grids still help (denser_grids_may_help);
+      // else the closest. Where Ω ends inside the grid, a face
       // that misses the target is first tried again at the same density kept 1, 2, 4, 8
       // envelope rows (columns) farther from that end: the kink where Ω ends is what a denser
       // grid then fits slowly (the noisy barrel's second patch went to 3001 × 1257 points,
@@ -424,10 +427,17 @@ std::vector<WrittenFace> write_patches_step(const std::filesystem::path& path, c
         else if (unlaid == 2) more_cols *= 2;
         else break;  // laid, and the surface misses: the densities below take it on
       }
+      // Denser grids only while they pay: each time the points have doubled both ways, the
+      // best face must have halved its miss (denser_grids_may_help).
+      double before = std::numeric_limits<double>::infinity();
       for (const auto& [more_rows, more_cols] : {std::pair{1, 1}, {2, 1}, {2, 2}, {4, 2}, {4, 4}, {8, 4}, {8, 8}}) {
         if (met) break;
         const bool tried = std::find(followed.begin(), followed.end(), std::pair{more_rows, more_cols}) != followed.end();
         attempt(more_rows, more_cols, !tried, true, nullptr);
+        if (more_rows != more_cols) continue;
+        const std::optional<double> now = out.best ? std::optional(out.best->deviation) : std::nullopt;
+        if (more_rows > 1 && !met && !denser_grids_may_help(before, now)) break;
+        before = now.value_or(std::numeric_limits<double>::infinity());
       }
     } catch (...) {
       out.error = std::current_exception();

@@ -4,6 +4,7 @@
 #pragma once
 
 #include <filesystem>
+#include <optional>
 #include <string>
 #include <vector>
 
@@ -40,6 +41,17 @@ FaceBreaks face_breaks(const Patch& p);
 // else more. Throws io::Error(name: …).
 FittedSurface fit_exact_grid(const std::string& name, const Points& fine, int rows, int cols,
                              double target, const FaceDomain& domain = {}, const FaceBreaks& breaks = {});
+
+// patches.step's search for a face within tolerance/150 tries denser grids of Ω (2 × 1, 2 × 2,
+// 4 × 2, ... up to 8 × 8 times the points) while they may help: after a square density (2k × 2k
+// times the points) it goes on only if a face exists (`now`) and misses by at most half what
+// the best did after k × k (`before`; +∞ when there was none). A cubic's miss on a smooth Ω
+// falls about 16× when the points double both ways; one that does not even halve means Ω is
+// not smooth at the grid's scale (it folds, or the grid jumps between its two sides), and
+// denser grids then cost time without a face: the ladder's 2k blade rung spent 8.4 of its 8.7 s
+// of search on three such faces. No face of the coverage cases met the target after a step
+// that failed this test (none needed uniform knots at all).
+bool denser_grids_may_help(double before, std::optional<double> now);
 
 // Ω of patch `p` sampled exactly (forward model), on the side its envelope grid took, on a
 // (2·rows − 1) × (2·cols − 1) grid uniform over (t, s) ∈ [0, 1]², cut down to the rows and

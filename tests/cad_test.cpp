@@ -8,7 +8,9 @@
 #include <cmath>
 #include <filesystem>
 #include <fstream>
+#include <limits>
 #include <nlohmann/json.hpp>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <tuple>
@@ -231,6 +233,31 @@ TEST_F(CadIo, PatchFaceKnotsFollowOmega) {
     worst = std::max(worst, (f.surface.point(t, sj) - e.point).norm());
   }
   EXPECT_LE(worst, 0.01 * tolerance);
+}
+
+// The search for a face goes to denser grids only while the best face's miss halves each
+// time the points double both ways; where Ω cannot be followed, it stops with the best face.
+TEST_F(CadIo, PatchFaceSearchStopsWhereDenserGridsDoNotHelp) {
+  const double inf = std::numeric_limits<double>::infinity();
+  EXPECT_TRUE(report::denser_grids_may_help(inf, 3.0));     // the first face
+  EXPECT_TRUE(report::denser_grids_may_help(18e-3, 2e-3));  // converging (a blade face's end)
+  EXPECT_TRUE(report::denser_grids_may_help(1.0, 0.5));
+  EXPECT_FALSE(report::denser_grids_may_help(1.0, 0.5000001));
+  EXPECT_FALSE(report::denser_grids_may_help(11.4, 11.39));  // the 2k blade rung's faces
+  EXPECT_FALSE(report::denser_grids_may_help(2.85, 2.05));
+  EXPECT_FALSE(report::denser_grids_may_help(inf, std::nullopt));  // no grid of Ω at 2 × 2 either
+  // Ω jumping between its two sides halfway along t (the envelope grid, which picks the side,
+  // is mirrored from there on): 10 mm apart, which no spline follows at any density. The
+  // face is still written, the best found, with its miss.
+  Patch p = sweeping_cylinder(false);
+  for (int i = p.envelope.rows / 2; i < p.envelope.rows; ++i)
+    for (int j = 0; j < p.envelope.cols; ++j) p.envelope.V(static_cast<Eigen::Index>(i) * p.envelope.cols + j, 1) *= -1.0;
+  const std::vector<report::WrittenFace> faces = report::write_patches_step(dir_ / "jump.step", {p}, 0.01);
+  ASSERT_EQ(faces.size(), 1u);
+  EXPECT_TRUE(std::isfinite(faces[0].deviation));
+  EXPECT_GT(faces[0].deviation, 1.0);
+  const io::CadPart part = io::CadPart::read((dir_ / "jump.step").string());
+  EXPECT_EQ(part.faces().size(), 1u);
 }
 
 // patches.step's faces are fitted concurrently: the file, the deviations and the domains are
