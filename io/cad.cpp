@@ -19,6 +19,7 @@
 #include <cstdlib>
 #include <functional>
 #include <mutex>
+#include <system_error>
 #include <thread>
 #include <unordered_map>
 
@@ -48,10 +49,17 @@ class Module {
     static Module module;
     return module;
   }
-  // Starts opening the module on a thread of its own; joined by the first get() or at exit.
+  // Starts opening the module on a thread of its own, once, unless it is open; the thread is
+  // joined by the first get() or at exit.
   void preload() {
     const std::lock_guard lock(mutex_);
-    if (!thread_.joinable() && !done_) thread_ = std::thread([this] { open(); });
+    if (started_ || ready_.load(std::memory_order_acquire)) return;
+    started_ = true;
+    try {
+      thread_ = std::thread([this] { open(); });
+    } catch (const std::system_error&) {
+      // No thread to spare: the module is opened when first needed instead.
+    }
   }
   // The table, or io::Error("NAME: problem") when the module cannot be opened.
   const cad_module::Api& get(const std::string& name) {
@@ -80,7 +88,7 @@ class Module {
         std::error_code ec;
         const fs::path self = fs::read_symlink("/proc/self/exe", ec);
         if (!ec) paths.push_back((self.parent_path() / "libflank_cad.so").string());
-        paths.emplace_back(FLANK_CAD_MODULE_PATH);
+        if (paths.empty() || paths.front() != FLANK_CAD_MODULE_PATH) paths.emplace_back(FLANK_CAD_MODULE_PATH);
       }
       std::string tried;
       for (const std::string& path : paths) {
@@ -104,14 +112,13 @@ class Module {
       if (!api_)
         error_ = "STEP and IGES files need flank's CAD module (libflank_cad.so, Open CASCADE), which did not open: " +
                  tried;
-      done_ = true;
     });
   }
 
   std::mutex mutex_;
   std::thread thread_;
   std::once_flag once_;
-  bool done_ = false;
+  bool started_ = false;  // under mutex_: preload started the thread once
   const cad_module::Api* api_ = nullptr;  // written once, in open()
   std::string error_;
   std::atomic<const cad_module::Api*> ready_{nullptr};
