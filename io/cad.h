@@ -37,7 +37,8 @@ struct CadTessellation {
 
 // Open CASCADE is loaded (the CAD module, io/cad_module.h) when a STEP or IGES file is first
 // read or written. A command that will write one calls this first: the module is then opened
-// on a thread of its own while the command works (80 ms of OCCT's libraries on this machine).
+// on a thread of its own while the command works (OCCT's libraries took 50–80 ms to load on
+// the 2-core machines here).
 void preload_cad_module();
 // Waits for the module if it is being opened, opens it if not; throws io::Error("NAME: why")
 // when it cannot be opened.

@@ -389,12 +389,11 @@ std::vector<WrittenFace> write_patches_step(const std::filesystem::path& path, c
       // columns (more points to hold more knots, where the face needs more poles than four
       // fifths of the grid's points), until the face is within 1/150 of the tolerance (a
       // margin under the 1% promised), while denser grids still help (denser_grids_may_help);
-      // else the closest. Where Ω ends inside the grid, a face
-      // that misses the target is first tried again at the same density kept 1, 2, 4, 8
-      // envelope rows (columns) farther from that end: the kink where Ω ends is what a denser
-      // grid then fits slowly (the noisy barrel's second patch went to 3001 × 1257 points,
-      // 1/75 of the tolerance, where one row off its end met the target at 376 × 158; 28 of
-      // its command's 35 s).
+      // else the closest. Where Ω ends inside the grid, a face that misses the target is first
+      // tried again at the same density kept 1, 2, 4, 8 envelope rows (columns) farther from
+      // that end: the kink where Ω ends is what a denser grid then fits slowly (the noisy
+      // barrel's second patch went to 3001 × 1257 points, 1/75 of the tolerance, where one row
+      // off its end met the target at 376 × 158; 28 of its command's 35 s).
       // Knots that follow Ω are tried first on grids denser along the direction where they
       // could not be laid (up to 8×), before uniform knots on any: where Ω turns faster than
       // the grid's rows near an end (HECC side a at 1e-4, patch 1; a made-up blade's face whose
