@@ -133,7 +133,7 @@ void require_cad_module(const std::string& name) { module(name); }
 
 bool is_cad_path(const std::string& path) {
   const std::string ext = lower_extension(path);
-  return ext == ".step" || ext == ".stp" || ext == ".iges" || ext == ".igs";
+  return cad_module::step_extension(ext) || ext == ".iges" || ext == ".igs";
 }
 
 struct CadPart::Impl {
@@ -228,7 +228,7 @@ std::unique_ptr<CadPart::Impl> CadPart::read_in_process(const std::string& path)
   auto impl = std::make_unique<Impl>();
   impl->path = path;
   const std::string ext = lower_extension(path);
-  const bool step = ext == ".step" || ext == ".stp";
+  const bool step = cad_module::step_extension(ext);
   impl->format = step ? "step" : "iges";
   if (step && bytes.find("ISO-10303-21") == std::string::npos)
     fail(path, "not a STEP file (no ISO-10303-21 header)");
@@ -383,7 +383,7 @@ namespace {
 // Whether `path` names a STEP file (else IGES); io::Error for any other extension.
 bool step_path(const fs::path& path) {
   const std::string ext = lower_extension(path);
-  const bool step = ext == ".step" || ext == ".stp";
+  const bool step = cad_module::step_extension(ext);
   if (!step && ext != ".iges" && ext != ".igs")
     fail(path.string(), "unsupported CAD extension '" + one_line(ext) + "' (expected .step, .stp, .iges or .igs)");
   return step;

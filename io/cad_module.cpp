@@ -399,7 +399,7 @@ void size(const Surface& s, int& poles_u, int& poles_v, int& degree_u, int& degr
 std::string document_bytes(const fs::path& path, const Handle(TDocStd_Document)& doc) {
   const std::string name = path.string();
   const std::string ext = lower_extension(path);
-  const bool step = ext == ".step" || ext == ".stp";  // else IGES (io/cad.cpp checked)
+  const bool step = step_extension(ext);  // else IGES (io/cad.cpp checked)
   // OCCT writes to a path; the bytes go through flank's atomic writer so that the output set
   // stays all or nothing. The scratch file is private (mkstemp) and removed.
   std::string scratch_path =

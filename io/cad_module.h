@@ -19,6 +19,9 @@ namespace flank::io::cad_module {
 
 constexpr int kVersion = 1;
 
+// Whether a CAD file's lower-case extension (io::lower_extension) is STEP's; IGES's otherwise.
+inline bool step_extension(const std::string& ext) { return ext == ".step" || ext == ".stp"; }
+
 struct Shape;    // a read part's shape and its faces' map (OCCT's), owned by the module
 struct Surface;  // a B-spline surface (OCCT's)
 
