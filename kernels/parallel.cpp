@@ -12,6 +12,7 @@
 #include <algorithm>
 #include <atomic>
 #include <cstdint>
+#include <mutex>
 #include <stdexcept>
 #include <vector>
 
@@ -280,8 +281,14 @@ class FirstEntry : public tbb::task_scheduler_observer {
 
 void on_each_worker_thread(std::function<void()> f) {
   // Never destroyed: it observes for the rest of the process, and at exit the scheduler may
-  // outlive any static object.
-  new FirstEntry(std::move(f));
+  // outlive any static object. Kept in a never-destroyed list that a global points to: once
+  // oneTBB drops its own list at exit, the observer and oneTBB's record of it only point to
+  // each other, and LeakSanitizer reported them as leaked (once in four CI runs).
+  static std::mutex mutex;
+  static auto* const kept = new std::vector<const FirstEntry*>;
+  const FirstEntry* entry = new FirstEntry(std::move(f));
+  const std::lock_guard lock(mutex);
+  kept->push_back(entry);
 }
 
 void start_worker_threads() {
