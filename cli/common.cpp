@@ -283,12 +283,38 @@ void write_outputs(io::OutputSet& out, const PatchArgs& a, const Design& design,
   const std::string stem = std::filesystem::path(a.mesh).stem().string();
   const std::vector<std::function<void()>> writers{
       [&] {
-        // Waits for the CAD module if it is still being opened; if it cannot be, the one line
-        // names the file a user asked for, not its staged copy.
-        io::require_cad_module((std::filesystem::path(a.out_dir) / "patches.step").string());
-        for (const report::WrittenFace& f : report::write_patches_step(out.staged("patches.step"), patches, tolerance))
+        // patches.step's faces are fitted (flank's own work) while the CAD module is waited for
+        // and tools.step written: on one patch the fit is most of this chain. Errors in the
+        // chain's order: the module (the one line names the file a user asked for, not its
+        // staged copy), patches.step, tools.step.
+        std::exception_ptr no_module, fit_failed, tools_failed;
+        std::vector<report::PatchFace> faces;
+        run_beside(
+            [&] {
+              try {
+                io::require_cad_module((std::filesystem::path(a.out_dir) / "patches.step").string());
+              } catch (...) {
+                no_module = std::current_exception();
+                return;
+              }
+              try {
+                report::write_tools_step(out.staged("tools.step"), patches);
+              } catch (...) {
+                tools_failed = std::current_exception();
+              }
+            },
+            [&] {
+              try {
+                faces = report::fit_patch_faces(out.staged("patches.step").string(), patches, tolerance);
+              } catch (...) {
+                fit_failed = std::current_exception();
+              }
+            });
+        for (const std::exception_ptr& e : {no_module, fit_failed})
+          if (e) std::rethrow_exception(e);
+        for (const report::WrittenFace& f : report::write_patches_step(out.staged("patches.step"), patches, faces))
           run.nurbs.push_back({f.deviation, f.domain.t0, f.domain.t1, f.domain.s0, f.domain.s1});
-        report::write_tools_step(out.staged("tools.step"), patches);
+        if (tools_failed) std::rethrow_exception(tools_failed);
         report::write_patches_json(out.staged("patches.json"), run, patches);
       },
       [&] {

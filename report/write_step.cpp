@@ -1,6 +1,8 @@
 #include "report/write_step.h"
 
 #include <algorithm>
+#include <cassert>
+#include <array>
 #include <cmath>
 #include <exception>
 #include <limits>
@@ -18,6 +20,11 @@ namespace flank::report {
 
 namespace {
 constexpr int kProfileSamples = 101;  // the meridian samples of patches.json's tool.profile
+// The face fit's parallel blocks: curves of the grid whose knots are laid together, rows of the
+// fine grid whose deviation is measured together. Fixed sizes, so that the work and its
+// result do not depend on the thread count; large enough that a block outweighs its task.
+constexpr int kCurveBlock = 32;
+constexpr int kFineRowBlock = 32;
 }  // namespace
 
 namespace {
@@ -62,14 +69,7 @@ std::vector<double> piece_knots(const std::vector<double>& breaks, double lo, do
   return k;
 }
 
-// A fitted surface before it becomes OCCT's: its poles (nu × nv, row-major, rows along u) on
-// clamped knots (over the face's domain), and its deviation from the exact points.
-struct PoleGrid {
-  Points poles;
-  int nu = 0, nv = 0;
-  std::vector<double> knots_u, knots_v;
-  double deviation = 0.0;
-};
+using PoleGrid = FacePoles;
 
 int pole_count(const std::vector<double>& knots) { return static_cast<int>(knots.size()) - kSplineDegree - 1; }
 
@@ -113,20 +113,32 @@ PoleGrid least_squares(const std::string& name, const Points& grid, int rows, in
 double deviation(const PoleGrid& g, const Points& fine, int rows, int cols) {
   const int fine_rows = 2 * rows - 1, fine_cols = 2 * cols - 1;
   const Eigen::SparseMatrix<double> Bu = basis_matrix(fine_rows, g.knots_u), Bv = basis_matrix(fine_cols, g.knots_v);
-  Eigen::MatrixXd squared = Eigen::MatrixXd::Zero(fine_rows, fine_cols);
+  std::array<Eigen::MatrixXd, 3> on_u;  // per coordinate, fine_rows × nv
   for (int c = 0; c < 3; ++c) {
     Eigen::MatrixXd P(g.nu, g.nv);
     for (int i = 0; i < g.nu; ++i)
       for (int j = 0; j < g.nv; ++j) P(i, j) = g.poles(static_cast<Eigen::Index>(i) * g.nv + j, c);
-    const Eigen::MatrixXd on_u = Bu * P;                                        // fine_rows × nv
-    const Eigen::MatrixXd on = (Bv * on_u.transpose()).transpose();             // fine_rows × fine_cols
-    for (int i = 0; i < fine_rows; ++i)
-      for (int j = 0; j < fine_cols; ++j) {
-        const double e = on(i, j) - fine(static_cast<Eigen::Index>(i) * fine_cols + j, c);
-        squared(i, j) += e * e;
-      }
+    on_u[static_cast<std::size_t>(c)] = Bu * P;
   }
-  return std::sqrt(squared.maxCoeff());
+  // The fine rows in blocks of a fixed size, in parallel; a maximum is the same in any order.
+  const int block = kFineRowBlock, blocks = (fine_rows + block - 1) / block;
+  std::vector<double> worst(static_cast<std::size_t>(blocks), 0.0);
+  parallel_for(0, static_cast<std::size_t>(blocks), [&](std::size_t b0, std::size_t b1) {
+    for (std::size_t b = b0; b < b1; ++b) {
+      const int i0 = static_cast<int>(b) * block, h = std::min(block, fine_rows - i0);
+      Eigen::MatrixXd squared = Eigen::MatrixXd::Zero(fine_cols, h);
+      for (int c = 0; c < 3; ++c) {
+        const Eigen::MatrixXd on = Bv * on_u[static_cast<std::size_t>(c)].middleRows(i0, h).transpose();  // fine_cols × h
+        for (int i = 0; i < h; ++i)
+          for (int j = 0; j < fine_cols; ++j) {
+            const double e = on(j, i) - fine(static_cast<Eigen::Index>(i0 + i) * fine_cols + j, c);
+            squared(j, i) += e * e;
+          }
+      }
+      worst[b] = squared.maxCoeff();
+    }
+  }, 1);
+  return std::sqrt(*std::max_element(worst.begin(), worst.end()));
 }
 
 // Knots along one direction with which every curve of the grid along it (the columns when
@@ -153,19 +165,29 @@ std::optional<std::vector<double>> direction_knots(const Points& fine, int rows,
     const Direction d(n, knots);
     if (!d.ok()) return std::nullopt;
     const Eigen::SparseMatrix<double> fine_basis = basis_matrix(2 * n - 1, knots);
-    Eigen::MatrixXd squared = Eigen::MatrixXd::Zero(2 * n - 1, m);
-    for (int c = 0; c < 3; ++c) {
-      Eigen::MatrixXd P(n, m);
-      for (int a = 0; a < n; ++a)
-        for (int b = 0; b < m; ++b) P(a, b) = at(2 * a, b, c);
-      const Eigen::MatrixXd on = fine_basis * d.solve(P);  // (2n − 1) × m
-      for (int a = 0; a < 2 * n - 1; ++a)
-        for (int b = 0; b < m; ++b) {
-          const double e = on(a, b) - at(a, b, c);
-          squared(a, b) += e * e;
+    // The curves in blocks of a fixed size, in parallel; each block's worst squared error at
+    // every fine parameter, then the largest over the blocks (the same in any order).
+    const int block = kCurveBlock, blocks = (m + block - 1) / block;
+    Eigen::MatrixXd block_worst(2 * n - 1, blocks);
+    parallel_for(0, static_cast<std::size_t>(blocks), [&](std::size_t k0, std::size_t k1) {
+      for (std::size_t k = k0; k < k1; ++k) {
+        const int b0 = static_cast<int>(k) * block, w = std::min(block, m - b0);
+        Eigen::MatrixXd squared = Eigen::MatrixXd::Zero(2 * n - 1, w);
+        for (int c = 0; c < 3; ++c) {
+          Eigen::MatrixXd P(n, w);
+          for (int a = 0; a < n; ++a)
+            for (int b = 0; b < w; ++b) P(a, b) = at(2 * a, b0 + b, c);
+          const Eigen::MatrixXd on = fine_basis * d.solve(P);  // (2n − 1) × w
+          for (int a = 0; a < 2 * n - 1; ++a)
+            for (int b = 0; b < w; ++b) {
+              const double e = on(a, b) - at(a, b0 + b, c);
+              squared(a, b) += e * e;
+            }
         }
-    }
-    const Eigen::VectorXd worst = squared.rowwise().maxCoeff();
+        block_worst.col(static_cast<Eigen::Index>(k)) = squared.rowwise().maxCoeff();
+      }
+    }, 1);
+    const Eigen::VectorXd worst = block_worst.rowwise().maxCoeff();
     if (std::sqrt(worst.maxCoeff()) <= target) return knots;
     // Split every span holding a fine parameter that misses (a parameter on a knot: both sides).
     std::vector<double> split;
@@ -252,12 +274,23 @@ FittedSurface fit_exact_grid(const std::string& name, const Points& fine, int ro
   return to_surface(name, *fit_poles(name, fine, rows, cols, target, domain, breaks));
 }
 
-bool exact_omega_grid(const Patch& p, int& rows, int& cols, Points& fine, FaceDomain* domain, int margin) {
+namespace {
+
+// Ω of a patch at the (2·rows − 1) × (2·cols − 1) fine parameters over [0, 1]², before
+// exact_omega_grid cuts it: the same for every margin, so sampled once per density.
+struct OmegaSamples {
+  int rows = 0, cols = 0;  // of the coarse grid
+  Points all;              // fine row-major; rows where `valid` is 0 unset
+  std::vector<char> valid;
+};
+
+std::optional<OmegaSamples> sample_omega(const Patch& p, int rows, int cols) {
   const EnvelopeMesh& env = p.envelope;
-  if (env.rows < 2 || env.cols < 2 || env.V.rows() != static_cast<Eigen::Index>(env.rows) * env.cols) return false;
+  if (env.rows < 2 || env.cols < 2 || env.V.rows() != static_cast<Eigen::Index>(env.rows) * env.cols)
+    return std::nullopt;
   const int fr = 2 * rows - 1, fc = 2 * cols - 1;
-  Points all(static_cast<Eigen::Index>(fr) * fc, 3);
-  std::vector<char> valid(static_cast<std::size_t>(fr) * fc, 0);
+  OmegaSamples out{rows, cols, Points(static_cast<Eigen::Index>(fr) * fc, 3),
+                   std::vector<char>(static_cast<std::size_t>(fr) * fc, 0)};
   auto V = [&](int a, int b) -> Vec3 { return env.V.row(static_cast<Eigen::Index>(a) * env.cols + b).transpose(); };
   // The cutter's radius and slope depend on the column only.
   std::vector<double> radius(static_cast<std::size_t>(fc)), slope(static_cast<std::size_t>(fc));
@@ -266,32 +299,46 @@ bool exact_omega_grid(const Patch& p, int& rows, int& cols, Points& fine, FaceDo
     radius[static_cast<std::size_t>(j)] = p.cutter.radius(s);
     slope[static_cast<std::size_t>(j)] = p.cutter.slope(s);
   }
-  for (int i = 0; i < fr; ++i) {
-    const double t = i / static_cast<double>(fr - 1);
-    const Line l = p.motion.ruling(t);
-    const Vec3 at = p.motion.a_at(t, 1), bt = p.motion.b_at(t, 1);
-    const double ti = t * (env.rows - 1);
-    const int i0 = std::min(static_cast<int>(ti), env.rows - 2);
-    const double wu = ti - i0;
-    for (int j = 0; j < fc; ++j) {
-      const double s = j / static_cast<double>(fc - 1);
-      // The side the envelope grid took: the candidate nearer to it (bilinear between samples).
-      const double sj = s * (env.cols - 1);
-      const int j0 = std::min(static_cast<int>(sj), env.cols - 2);
-      const double wv = sj - j0;
-      const Vec3 near = (1 - wu) * ((1 - wv) * V(i0, j0) + wv * V(i0, j0 + 1)) +
-                        wu * ((1 - wv) * V(i0 + 1, j0) + wv * V(i0 + 1, j0 + 1));
-      const Vec3 centre = l.point(s), rs = l.b - l.a, rt = (1 - s) * at + s * bt;
-      const double d = radius[static_cast<std::size_t>(j)], dd = slope[static_cast<std::size_t>(j)];
-      const EnvelopePoint plus = envelope_point(centre, rt, rs, d, dd, +1);
-      const EnvelopePoint minus = envelope_point(centre, rt, rs, d, dd, -1);
-      const std::size_t k = static_cast<std::size_t>(i) * fc + j;
-      valid[k] = plus.valid && minus.valid && plus.point.allFinite() && minus.point.allFinite();
-      if (!valid[k]) continue;
-      const Vec3 q = (plus.point - near).norm() <= (minus.point - near).norm() ? plus.point : minus.point;
-      all.row(static_cast<Eigen::Index>(k)) = q.transpose();
+  // Each fine row on its own (the cone part's one face: 645 rows of 333 points, 15 ms on one
+  // thread).
+  parallel_for(0, static_cast<std::size_t>(fr), [&](std::size_t r0, std::size_t r1) {
+    for (int i = static_cast<int>(r0); i < static_cast<int>(r1); ++i) {
+      const double t = i / static_cast<double>(fr - 1);
+      const Line l = p.motion.ruling(t);
+      const Vec3 at = p.motion.a_at(t, 1), bt = p.motion.b_at(t, 1);
+      const double ti = t * (env.rows - 1);
+      const int i0 = std::min(static_cast<int>(ti), env.rows - 2);
+      const double wu = ti - i0;
+      for (int j = 0; j < fc; ++j) {
+        const double s = j / static_cast<double>(fc - 1);
+        // The side the envelope grid took: the candidate nearer to it (bilinear between samples).
+        const double sj = s * (env.cols - 1);
+        const int j0 = std::min(static_cast<int>(sj), env.cols - 2);
+        const double wv = sj - j0;
+        const Vec3 near = (1 - wu) * ((1 - wv) * V(i0, j0) + wv * V(i0, j0 + 1)) +
+                          wu * ((1 - wv) * V(i0 + 1, j0) + wv * V(i0 + 1, j0 + 1));
+        const Vec3 centre = l.point(s), rs = l.b - l.a, rt = (1 - s) * at + s * bt;
+        const double d = radius[static_cast<std::size_t>(j)], dd = slope[static_cast<std::size_t>(j)];
+        const EnvelopePoint plus = envelope_point(centre, rt, rs, d, dd, +1);
+        const EnvelopePoint minus = envelope_point(centre, rt, rs, d, dd, -1);
+        const std::size_t k = static_cast<std::size_t>(i) * fc + j;
+        out.valid[k] = plus.valid && minus.valid && plus.point.allFinite() && minus.point.allFinite();
+        if (!out.valid[k]) continue;
+        const Vec3 q = (plus.point - near).norm() <= (minus.point - near).norm() ? plus.point : minus.point;
+        out.all.row(static_cast<Eigen::Index>(k)) = q.transpose();
+      }
     }
-  }
+  }, 8);
+  return out;
+}
+
+bool cut_omega_grid(const Patch& p, const OmegaSamples& samples, int& rows, int& cols, Points& fine,
+                    FaceDomain* domain, int margin) {
+  const EnvelopeMesh& env = p.envelope;
+  rows = samples.rows, cols = samples.cols;
+  const int fc = 2 * cols - 1;
+  const Points& all = samples.all;
+  const std::vector<char>& valid = samples.valid;
   // Rows and columns of the rows × cols grid, cut from the ends while the band of fine samples
   // beside the kept rectangle's edge lacks Ω somewhere.
   int r0 = 0, r1 = rows - 1, c0 = 0, c1 = cols - 1;
@@ -333,6 +380,13 @@ bool exact_omega_grid(const Patch& p, int& rows, int& cols, Points& fine, FaceDo
   return fine.allFinite();
 }
 
+}  // namespace
+
+bool exact_omega_grid(const Patch& p, int& rows, int& cols, Points& fine, FaceDomain* domain, int margin) {
+  const std::optional<OmegaSamples> samples = sample_omega(p, rows, cols);
+  return samples && cut_omega_grid(p, *samples, rows, cols, fine, domain, margin);
+}
+
 std::vector<Vec2> solid_profile(const Cutter& c) {
   std::vector<Vec2> m;
   bool simple = true;
@@ -368,10 +422,8 @@ std::string face_name(const Patch& p) {
 }
 std::string tool_name(const Patch& p) { return face_name(p) + "-tool"; }
 
-std::vector<WrittenFace> write_patches_step(const std::filesystem::path& path, const std::vector<Patch>& patches,
-                                            double tolerance) {
-  // Each patch's face is fitted on its own, concurrently (without OCCT: poles and the measured
-  // deviation only); the faces then go to OCCT in patch order. An error of a patch's fit is
+std::vector<PatchFace> fit_patch_faces(const std::string& file, const std::vector<Patch>& patches, double tolerance) {
+  // Each patch's face is fitted on its own, concurrently. An error of a patch's fit is
   // rethrown after all have run, the first in patch order, whatever the thread count.
   struct Fitted {
     std::optional<PoleGrid> best;
@@ -379,7 +431,6 @@ std::vector<WrittenFace> write_patches_step(const std::filesystem::path& path, c
     std::exception_ptr error;
   };
   std::vector<Fitted> fitted(patches.size());
-  const std::string file = path.string();
   parallel_invoke_each(patches.size(), [&](std::size_t k) {
     const Patch& p = patches[k];
     Fitted& out = fitted[k];
@@ -402,11 +453,13 @@ std::vector<WrittenFace> write_patches_step(const std::filesystem::path& path, c
       // 320 × 144 poles.
       bool met = false;
       const auto attempt = [&](int more_rows, int more_cols, bool following, bool uniform, int* unlaid) {
+        const std::optional<OmegaSamples> samples =
+            sample_omega(p, (p.envelope.rows - 1) * more_rows + 1, (p.envelope.cols - 1) * more_cols + 1);
         for (const int margin : {0, 1, 2, 4, 8}) {
-          int rows = (p.envelope.rows - 1) * more_rows + 1, cols = (p.envelope.cols - 1) * more_cols + 1;
+          int rows = 0, cols = 0;
           Points fine;
           FaceDomain domain;
-          if (!exact_omega_grid(p, rows, cols, fine, &domain, margin)) break;
+          if (!samples || !cut_omega_grid(p, *samples, rows, cols, fine, &domain, margin)) break;
           const bool trimmed = domain.t0 > 0.0 || domain.t1 < 1.0 || domain.s0 > 0.0 || domain.s1 < 1.0;
           std::optional<PoleGrid> g = fit_poles(file + ": patch " + std::to_string(p.id), fine, rows, cols,
                                                 tolerance / 150.0, domain, breaks, following, uniform,
@@ -444,16 +497,31 @@ std::vector<WrittenFace> write_patches_step(const std::filesystem::path& path, c
   });
   for (const Fitted& f : fitted)
     if (f.error) std::rethrow_exception(f.error);
+  std::vector<PatchFace> faces(patches.size());
+  for (std::size_t k = 0; k < patches.size(); ++k)
+    if (fitted[k].best) faces[k] = FittedFace{std::move(*fitted[k].best), fitted[k].domain};
+  return faces;
+}
+
+std::vector<WrittenFace> write_patches_step(const std::filesystem::path& path, const std::vector<Patch>& patches,
+                                            const std::vector<PatchFace>& fitted) {
+  assert(fitted.size() == patches.size());
+  const std::string file = path.string();
   std::vector<WrittenFace> written(patches.size(), {std::numeric_limits<double>::quiet_NaN(), {}});
   std::vector<io::NamedSurface> faces;
   for (std::size_t k = 0; k < patches.size(); ++k) {
-    if (!fitted[k].best) continue;
+    if (!fitted[k]) continue;
     const std::string name = face_name(patches[k]);
-    written[k] = {fitted[k].best->deviation, fitted[k].domain};
-    faces.push_back({name, to_surface(file + ": patch " + std::to_string(patches[k].id), *fitted[k].best).surface});
+    written[k] = {fitted[k]->poles.deviation, fitted[k]->domain};
+    faces.push_back({name, to_surface(file + ": patch " + std::to_string(patches[k].id), fitted[k]->poles).surface});
   }
   io::write_surfaces(path, faces);
   return written;
+}
+
+std::vector<WrittenFace> write_patches_step(const std::filesystem::path& path, const std::vector<Patch>& patches,
+                                            double tolerance) {
+  return write_patches_step(path, patches, fit_patch_faces(path.string(), patches, tolerance));
 }
 
 void write_tools_step(const std::filesystem::path& path, const std::vector<Patch>& patches) {

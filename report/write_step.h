@@ -78,9 +78,31 @@ struct WrittenFace {
   FaceDomain domain;
 };
 
-// patches.step: one named B-spline face per patch (within 1% of the tolerance).
+// A face before it becomes Open CASCADE's: its poles (nu × nv, row-major, rows along u) on
+// clamped cubic knots over its domain, and its deviation from the exact Ω, mm.
+struct FacePoles {
+  Points poles;
+  int nu = 0, nv = 0;
+  std::vector<double> knots_u, knots_v;
+  double deviation = 0.0;
+};
+struct FittedFace {
+  FacePoles poles;
+  FaceDomain domain;
+};
+// Empty where Ω could not be sampled (that patch is left out of patches.step).
+using PatchFace = std::optional<FittedFace>;
+
+// patches.step: one named B-spline face per patch, fitted within tolerance/150 where it can be
+// (a margin under the 1% promised), else as close as the search came.
 std::vector<WrittenFace> write_patches_step(const std::filesystem::path& path, const std::vector<Patch>& patches,
                                             double tolerance);
+// The same in two steps: the faces fitted (flank's own work, no Open CASCADE; `file` names the
+// output in errors), then written. A caller overlaps the fit with the CAD module's opening
+// or with other Open CASCADE work (tools.step).
+std::vector<PatchFace> fit_patch_faces(const std::string& file, const std::vector<Patch>& patches, double tolerance);
+std::vector<WrittenFace> write_patches_step(const std::filesystem::path& path, const std::vector<Patch>& patches,
+                                            const std::vector<PatchFace>& faces);
 // tools.step: each cutter's meridian (solid_profile), closed by flat ends and
 // revolved about its axis, placed at t = 0 of its motion.
 void write_tools_step(const std::filesystem::path& path, const std::vector<Patch>& patches);
