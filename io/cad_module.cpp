@@ -535,6 +535,13 @@ std::string solids_file(const std::string& path, const std::vector<RevolvedSolid
   return document_bytes(path, doc);
 }
 
+// What every first translation would otherwise do on the command's path: the translators'
+// set-up (quiet_occt) and the document application with its resources, made once here, on
+// the thread that opens the module (io/cad.cpp: beside the command's own work).
+void warm_up() {
+  quiet_occt();
+  Document document;
+}
 
 const Api kApi = [] {
   Api api;
@@ -556,4 +563,7 @@ const Api kApi = [] {
 
 }  // namespace flank::io::cad_module
 
-const flank::io::cad_module::Api* flank_cad_module() { return &flank::io::cad_module::kApi; }
+const flank::io::cad_module::Api* flank_cad_module() {
+  flank::io::cad_module::warm_up();
+  return &flank::io::cad_module::kApi;
+}
