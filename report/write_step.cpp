@@ -1,9 +1,10 @@
 #include "report/write_step.h"
 
 #include <algorithm>
-#include <cassert>
 #include <array>
+#include <cassert>
 #include <cmath>
+#include <deque>
 #include <exception>
 #include <limits>
 #include <optional>
@@ -148,10 +149,11 @@ double deviation(const PoleGrid& g, const Points& fine, int rows, int cols) {
 // longer be split, or the poles would outnumber four fifths of the points (as the densest
 // uniform fit below): beyond, least squares loses its hold on the points. Where the error is
 // (near Ω's ends, where the envelope turns fast) is where the knots go: Rotor 67 lower's
-// twelve faces took 9k poles this way where uniform knots took 226k.
+// twelve faces took 9k poles this way where uniform knots took 226k. On nullopt, `miss` (if
+// given) receives the worst distance of the last knots tried (infinity if none were).
 std::optional<std::vector<double>> direction_knots(const Points& fine, int rows, int cols, bool along_rows,
                                                    const std::vector<double>& breaks, double lo, double hi,
-                                                   double target) {
+                                                   double target, double* miss = nullptr) {
   const int fine_cols = 2 * cols - 1;
   const int n = along_rows ? cols : rows, m = along_rows ? rows : cols;  // points along, curves
   const auto at = [&](int fine_along, int curve, int c) {
@@ -160,10 +162,15 @@ std::optional<std::vector<double>> direction_knots(const Points& fine, int rows,
   };
   const double spacing = (hi - lo) / (n - 1);
   std::vector<double> knots = piece_knots(breaks, lo, hi);
+  double last = std::numeric_limits<double>::infinity();
+  const auto give_up = [&] {
+    if (miss) *miss = last;
+    return std::nullopt;
+  };
   for (;;) {
-    if (pole_count(knots) > std::max(4, (4 * n) / 5)) return std::nullopt;
+    if (pole_count(knots) > std::max(4, (4 * n) / 5)) return give_up();
     const Direction d(n, knots);
-    if (!d.ok()) return std::nullopt;
+    if (!d.ok()) return give_up();
     const Eigen::SparseMatrix<double> fine_basis = basis_matrix(2 * n - 1, knots);
     // The curves in blocks of a fixed size, in parallel; each block's worst squared error at
     // every fine parameter, then the largest over the blocks (the same in any order).
@@ -188,7 +195,8 @@ std::optional<std::vector<double>> direction_knots(const Points& fine, int rows,
       }
     }, 1);
     const Eigen::VectorXd worst = block_worst.rowwise().maxCoeff();
-    if (std::sqrt(worst.maxCoeff()) <= target) return knots;
+    last = std::sqrt(worst.maxCoeff());
+    if (last <= target) return knots;
     // Split every span holding a fine parameter that misses (a parameter on a knot: both sides).
     std::vector<double> split;
     for (std::size_t k = kSplineDegree; k + kSplineDegree + 1 < knots.size(); ++k) {
@@ -199,7 +207,7 @@ std::optional<std::vector<double>> direction_knots(const Points& fine, int rows,
       bool misses = false;
       for (int a = std::max(0, a0); a <= std::min(2 * n - 2, a1) && !misses; ++a) misses = worst(a) > target * target;
       if (!misses) continue;
-      if (k1 - k0 < 2.0 * spacing) return std::nullopt;
+      if (k1 - k0 < 2.0 * spacing) return give_up();
       split.push_back(0.5 * (k0 + k1));
     }
     knots.insert(knots.end(), split.begin(), split.end());
@@ -217,11 +225,16 @@ std::optional<std::vector<double>> direction_knots(const Points& fine, int rows,
 // four fifths as many poles as points, whose condition stays under 9 for every count up to 420
 // tried (half: under 5). `following` and `uniform` choose which of the two are tried; the result
 // is nothing when none was. `unlaid` (if given) receives the direction along which the knots
-// that follow Ω could not be laid (1: t, 2: s), else 0.
+// that follow Ω could not be laid, their miss there and the target they had, else direction 0.
+struct Unlaid {
+  int direction = 0;  // 1: t, 2: s
+  double miss = std::numeric_limits<double>::infinity();  // infinity: no knots were tried
+  double target = 0.0;
+};
 std::optional<PoleGrid> fit_poles(const std::string& name, const Points& fine, int rows, int cols, double target,
                                   const FaceDomain& domain, const FaceBreaks& breaks, bool following = true,
-                                  bool uniform = true, int* unlaid = nullptr) {
-  if (unlaid) *unlaid = 0;
+                                  bool uniform = true, Unlaid* unlaid = nullptr) {
+  if (unlaid) *unlaid = {};
   const int fine_cols = 2 * cols - 1;
   Points grid(static_cast<Eigen::Index>(rows) * cols, 3);
   for (int i = 0; i < rows; ++i)
@@ -234,12 +247,14 @@ std::optional<PoleGrid> fit_poles(const std::string& name, const Points& fine, i
     return best->deviation <= target;
   };
   if (following) {
+    double miss = std::numeric_limits<double>::infinity();
     const std::optional<std::vector<double>> ku =
-        direction_knots(fine, rows, cols, false, breaks.t, domain.t0, domain.t1, 0.5 * target);
+        direction_knots(fine, rows, cols, false, breaks.t, domain.t0, domain.t1, 0.5 * target, &miss);
     const std::optional<std::vector<double>> kv =
-        ku ? direction_knots(fine, rows, cols, true, breaks.s, domain.s0, domain.s1, 0.5 * target) : std::nullopt;
+        ku ? direction_knots(fine, rows, cols, true, breaks.s, domain.s0, domain.s1, 0.5 * target, &miss)
+           : std::nullopt;
     if (ku && kv && consider(least_squares(name, grid, rows, cols, *ku, *kv))) return best;
-    if (unlaid && !(ku && kv)) *unlaid = ku ? 2 : 1;
+    if (unlaid && !(ku && kv)) *unlaid = {ku ? 2 : 1, miss, 0.5 * target};
   }
   if (!uniform) return best;
   const auto poles = [](int points, bool more) {
@@ -260,6 +275,12 @@ FittedSurface to_surface(const std::string& name, const PoleGrid& g) {
 }  // namespace
 
 bool denser_grids_may_help(double before, std::optional<double> now) { return now && *now <= 0.5 * before; }
+
+bool knots_within_reach(double miss, double target, int more, int most) {
+  double reach = target;
+  for (int m = more; m < most; m *= 2) reach *= 16.0;
+  return !std::isfinite(miss) || miss <= reach;
+}
 
 FaceBreaks face_breaks(const Patch& p) {
   FaceBreaks b;
@@ -452,14 +473,25 @@ std::vector<PatchFace> fit_patch_faces(const std::string& file, const std::vecto
       // cannot be split finer than the rows, and uniform knots met the target there with up to
       // 320 × 144 poles.
       bool met = false;
-      const auto attempt = [&](int more_rows, int more_cols, bool following, bool uniform, int* unlaid) {
-        const std::optional<OmegaSamples> samples =
-            sample_omega(p, (p.envelope.rows - 1) * more_rows + 1, (p.envelope.cols - 1) * more_cols + 1);
+      // Ω's samples at the densities both passes below may try (1 × 1, 2 × 1), kept for the
+      // second (a deque: what it holds stays where it is).
+      std::deque<std::pair<std::pair<int, int>, std::optional<OmegaSamples>>> kept;
+      const auto attempt = [&](int more_rows, int more_cols, bool following, bool uniform, Unlaid* unlaid) {
+        const std::pair density{more_rows, more_cols};
+        const std::optional<OmegaSamples>* samples = nullptr;
+        for (const auto& [d, s] : kept)
+          if (d == density) samples = &s;
+        std::optional<OmegaSamples> fresh;
+        if (!samples) {
+          fresh = sample_omega(p, (p.envelope.rows - 1) * more_rows + 1, (p.envelope.cols - 1) * more_cols + 1);
+          samples = &fresh;
+          if (more_cols == 1 && more_rows <= 2) samples = &kept.emplace_back(density, std::move(fresh)).second;
+        }
         for (const int margin : {0, 1, 2, 4, 8}) {
           int rows = 0, cols = 0;
           Points fine;
           FaceDomain domain;
-          if (!samples || !cut_omega_grid(p, *samples, rows, cols, fine, &domain, margin)) break;
+          if (!*samples || !cut_omega_grid(p, **samples, rows, cols, fine, &domain, margin)) break;
           const bool trimmed = domain.t0 > 0.0 || domain.t1 < 1.0 || domain.s0 > 0.0 || domain.s1 < 1.0;
           std::optional<PoleGrid> g = fit_poles(file + ": patch " + std::to_string(p.id), fine, rows, cols,
                                                 tolerance / 150.0, domain, breaks, following, uniform,
@@ -470,14 +502,17 @@ std::vector<PatchFace> fit_patch_faces(const std::string& file, const std::vecto
         }
         return met;
       };
+      // Denser along the direction where the knots could not be laid only while the target
+      // is within reach there (knots_within_reach).
       std::vector<std::pair<int, int>> followed;  // densities where the first pass tried them
       for (int more_rows = 1, more_cols = 1; more_rows <= 8 && more_cols <= 8;) {
-        int unlaid = 0;
+        Unlaid unlaid;
         followed.emplace_back(more_rows, more_cols);
         if (attempt(more_rows, more_cols, true, false, &unlaid)) break;
-        if (unlaid == 1) more_rows *= 2;
-        else if (unlaid == 2) more_cols *= 2;
-        else break;  // laid, and the surface misses: the densities below take it on
+        if (unlaid.direction == 0) break;  // laid, and the surface misses: the densities below take it on
+        int& more = unlaid.direction == 1 ? more_rows : more_cols;
+        if (!knots_within_reach(unlaid.miss, unlaid.target, more, 8)) break;
+        more *= 2;
       }
       // Denser grids only while they pay: each time the points have doubled both ways, the
       // best face must have halved its miss (denser_grids_may_help).

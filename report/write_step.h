@@ -53,6 +53,17 @@ FittedSurface fit_exact_grid(const std::string& name, const Points& fine, int ro
 // that failed this test (none needed uniform knots at all).
 bool denser_grids_may_help(double before, std::optional<double> now);
 
+// The search's first pass lays knots that follow Ω; where a span that misses cannot be split
+// finer than the grid's rows (columns), it tries twice as many, up to `most` times the
+// envelope's. Each doubling lets the knots halve their spans once more, by which a cubic's
+// miss falls about 16× at best: a miss of the knots (at `more` times the rows) above 16^k
+// times their target, with k doublings left, is out of reach, and the pass stops there. The
+// ladder's 2k blade rung had a face that missed by 24000× its target on the envelope's rows
+// and 15000× on 8×, each time unlaid: 0.35 of its 0.78 s of writing; the faces the pass is
+// for missed by 1.1× (Rotor 67 upper at 3e-4, met on 4×) to 18×. An infinite miss (no knots
+// could be tried: more poles than the grid holds) is not judged.
+bool knots_within_reach(double miss, double target, int more, int most);
+
 // Ω of patch `p` sampled exactly (forward model), on the side its envelope grid took, on a
 // (2·rows − 1) × (2·cols − 1) grid uniform over (t, s) ∈ [0, 1]², cut down to the rows and
 // columns (of the rows × cols grid) where Ω exists everywhere: a motion that starts or ends

@@ -236,7 +236,8 @@ TEST_F(CadIo, PatchFaceKnotsFollowOmega) {
 }
 
 // The search for a face goes to denser grids only while the best face's miss halves each
-// time the points double both ways; where Ω cannot be followed, it stops with the best face.
+// time the points double both ways, and to denser rows for knots that follow Ω only while the
+// target is within their reach; where Ω cannot be followed, it stops with the best face.
 TEST_F(CadIo, PatchFaceSearchStopsWhereDenserGridsDoNotHelp) {
   const double inf = std::numeric_limits<double>::infinity();
   EXPECT_TRUE(report::denser_grids_may_help(inf, 3.0));     // the first face
@@ -246,6 +247,18 @@ TEST_F(CadIo, PatchFaceSearchStopsWhereDenserGridsDoNotHelp) {
   EXPECT_FALSE(report::denser_grids_may_help(11.4, 11.39));  // the 2k blade rung's faces
   EXPECT_FALSE(report::denser_grids_may_help(2.85, 2.05));
   EXPECT_FALSE(report::denser_grids_may_help(inf, std::nullopt));  // no grid of Ω at 2 × 2 either
+  // The first pass (knots that follow Ω, on up to 8 × the rows where they could not be laid)
+  // goes on while the knots' miss is within 16× their target per doubling left.
+  const double target = 5.19267e-4;  // the 2k blade rung's, at 1e-3 of its diagonal
+  EXPECT_FALSE(report::knots_within_reach(12.2918, target, 1, 8));  // its face that Ω folds on
+  EXPECT_FALSE(report::knots_within_reach(11.5655, target, 2, 8));
+  EXPECT_TRUE(report::knots_within_reach(2.17e-4, 1.91531e-4, 1, 8));  // Rotor 67 upper, 3e-4: met on 4×
+  EXPECT_TRUE(report::knots_within_reach(7.77e-4, 1.91531e-4, 2, 8));
+  EXPECT_TRUE(report::knots_within_reach(18.0, 1.0, 1, 8));  // a made-up blade's face: met on 2×
+  EXPECT_TRUE(report::knots_within_reach(4096.0, 1.0, 1, 8));
+  EXPECT_FALSE(report::knots_within_reach(4097.0, 1.0, 1, 8));
+  EXPECT_FALSE(report::knots_within_reach(17.0, 1.0, 4, 8));
+  EXPECT_TRUE(report::knots_within_reach(inf, 1.0, 1, 8));  // no knots tried: not judged
   // Ω jumping between its two sides halfway along t (the envelope grid, which picks the side,
   // is mirrored from there on): 10 mm apart, which no spline follows at any density. The
   // face is still written, the best found, with its miss.
