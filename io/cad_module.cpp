@@ -537,10 +537,15 @@ std::string solids_file(const std::string& path, const std::vector<RevolvedSolid
 
 // What every first translation would otherwise do on the command's path: the translators'
 // set-up (quiet_occt) and the document application with its resources, made once here, on
-// the thread that opens the module (io/cad.cpp: beside the command's own work).
-void warm_up() {
-  quiet_occt();
-  Document document;
+// the thread that opens the module (io/cad.cpp: beside the command's own work). Nothing may
+// escape the module's entry: should Open CASCADE fail here, the translation that needs it
+// fails again later, where its error names the file.
+void warm_up() noexcept {
+  try {
+    quiet_occt();
+    Document document;
+  } catch (...) {
+  }
 }
 
 const Api kApi = [] {
