@@ -70,7 +70,7 @@ std::vector<double> piece_knots(const std::vector<double>& breaks, double lo, do
   return k;
 }
 
-using PoleGrid = FacePoles;
+using PoleGrid = FacePoles;  // a face's poles, knots and deviation (report/write_step.h)
 
 int pole_count(const std::vector<double>& knots) { return static_cast<int>(knots.size()) - kSplineDegree - 1; }
 
@@ -467,7 +467,8 @@ std::vector<PatchFace> fit_patch_faces(const std::string& file, const std::vecto
       // barrel's second patch went to 3001 × 1257 points, 1/75 of the tolerance, where one row
       // off its end met the target at 376 × 158; 28 of its command's 35 s).
       // Knots that follow Ω are tried first on grids denser along the direction where they
-      // could not be laid (up to 8×), before uniform knots on any: where Ω turns faster than
+      // could not be laid (up to 8×, while the target is within their reach:
+      // knots_within_reach), before uniform knots on any: where Ω turns faster than
       // the grid's rows near an end (HECC side a at 1e-4, patch 1; a made-up blade's face whose
       // first span missed by 18× the target on the grid and 2× on twice the rows), a span
       // cannot be split finer than the rows, and uniform knots met the target there with up to
