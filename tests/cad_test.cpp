@@ -249,7 +249,7 @@ TEST_F(CadIo, PatchFaceSearchStopsWhereDenserGridsDoNotHelp) {
   EXPECT_FALSE(report::denser_grids_may_help(inf, std::nullopt));  // no grid of Ω at 2 × 2 either
   // The first pass (knots that follow Ω, on up to 8 × the rows where they could not be laid)
   // goes on while the knots' miss is within 16× their target per doubling left.
-  const double target = 5.19267e-4;  // the 2k blade rung's, at 1e-3 of its diagonal
+  const double target = 5.19267e-4;  // the 2k blade rung's knots' target: half of tolerance/150
   EXPECT_FALSE(report::knots_within_reach(12.2918, target, 1, 8));  // its face that Ω folds on
   EXPECT_FALSE(report::knots_within_reach(11.5655, target, 2, 8));
   EXPECT_TRUE(report::knots_within_reach(2.17e-4, 1.91531e-4, 1, 8));  // Rotor 67 upper, 3e-4: met on 4×
