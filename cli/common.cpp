@@ -63,6 +63,15 @@ std::vector<double> parse_numbers(const std::string& text, const std::string& op
   return out;
 }
 
+// Runs `f`; what it throws is kept in `failed`, for the caller to rethrow in its own order.
+void capture(std::exception_ptr& failed, const std::function<void()>& f) {
+  try {
+    f();
+  } catch (...) {
+    failed = std::current_exception();
+  }
+}
+
 }  // namespace
 
 Line parse_line(const std::string& text, const std::string& option) {
@@ -291,24 +300,15 @@ void write_outputs(io::OutputSet& out, const PatchArgs& a, const Design& design,
         std::vector<report::PatchFace> faces;
         run_beside(
             [&] {
-              try {
+              capture(no_module, [&] {
                 io::require_cad_module((std::filesystem::path(a.out_dir) / "patches.step").string());
-              } catch (...) {
-                no_module = std::current_exception();
-                return;
-              }
-              try {
-                report::write_tools_step(out.staged("tools.step"), patches);
-              } catch (...) {
-                tools_failed = std::current_exception();
-              }
+              });
+              if (!no_module) capture(tools_failed, [&] { report::write_tools_step(out.staged("tools.step"), patches); });
             },
             [&] {
-              try {
+              capture(fit_failed, [&] {
                 faces = report::fit_patch_faces(out.staged("patches.step").string(), patches, tolerance);
-              } catch (...) {
-                fit_failed = std::current_exception();
-              }
+              });
             });
         for (const std::exception_ptr& e : {no_module, fit_failed})
           if (e) std::rethrow_exception(e);
@@ -326,13 +326,7 @@ void write_outputs(io::OutputSet& out, const PatchArgs& a, const Design& design,
       [&] { report::write_toolpath_apt(out.staged("toolpath.apt"), patches, a.apt_steps, stem); },
   };
   std::vector<std::exception_ptr> failed(writers.size());
-  parallel_invoke_each(writers.size(), [&](std::size_t k) {
-    try {
-      writers[k]();
-    } catch (...) {
-      failed[k] = std::current_exception();
-    }
-  });
+  parallel_invoke_each(writers.size(), [&](std::size_t k) { capture(failed[k], writers[k]); });
   for (const std::exception_ptr& e : failed)
     if (e) std::rethrow_exception(e);
   out.commit();
