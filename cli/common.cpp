@@ -128,6 +128,9 @@ void set_action(CLI::App* cmd, int* exit_code, std::function<int()> run) {
       std::fprintf(stderr, "flank %s: unexpected error\n", cmd->get_name().c_str());
       *exit_code = 2;
     }
+    // A command that ends early (bad input, no patch) may end while the CAD module it preloaded
+    // is still opening; exit must not destroy Open CASCADE's statics under that thread.
+    io::settle_cad_module();
   });
 }
 

@@ -50,7 +50,7 @@ class Module {
     return module;
   }
   // Starts opening the module on a thread of its own, once, unless it is open; the thread is
-  // joined by the first get() or at exit.
+  // joined by the first get() or by settle().
   void preload() {
     const std::lock_guard lock(mutex_);
     if (started_ || ready_.load(std::memory_order_acquire)) return;
@@ -64,15 +64,19 @@ class Module {
   // The table, or io::Error("NAME: problem") when the module cannot be opened.
   const cad_module::Api& get(const std::string& name) {
     if (const cad_module::Api* api = ready_.load(std::memory_order_acquire)) return *api;
-    {
-      const std::lock_guard lock(mutex_);
-      if (thread_.joinable()) thread_.join();
-    }
+    settle();
     open();
     if (!api_) fail(name, error_);
     ready_.store(api_, std::memory_order_release);
     return *api_;
   }
+  void settle() {
+    const std::lock_guard lock(mutex_);
+    if (thread_.joinable()) thread_.join();
+  }
+  // Too late for the thread (settle_cad_module): exit has already run the destructors the
+  // libraries it opens registered, while it may still be using them. Joined all the same, as
+  // std::thread must be.
   ~Module() {
     if (thread_.joinable()) thread_.join();
   }
@@ -129,6 +133,7 @@ const cad_module::Api& module(const std::string& name) { return Module::instance
 }  // namespace
 
 void preload_cad_module() { Module::instance().preload(); }
+void settle_cad_module() { Module::instance().settle(); }
 void require_cad_module(const std::string& name) { module(name); }
 
 bool is_cad_path(const std::string& path) {

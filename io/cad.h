@@ -40,6 +40,10 @@ struct CadTessellation {
 // on a thread of its own while the command works (OCCT's libraries took 50–80 ms to load on
 // the 2-core machines here).
 void preload_cad_module();
+// Waits for a preload still opening the module; returns at once when none is. A program that
+// preloads calls this before it exits: the opening thread runs Open CASCADE's static
+// initialisers and the module's warm-up, and exit's destructors must not run under them.
+void settle_cad_module();
 // Waits for the module if it is being opened, opens it if not; throws io::Error("NAME: why")
 // when it cannot be opened.
 void require_cad_module(const std::string& name);

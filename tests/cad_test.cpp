@@ -487,6 +487,25 @@ TEST_F(CadIo, CommandLineWithoutTheModuleRefusesOnlyCad) {
   EXPECT_NE(info.err.find("libflank_cad.so"), std::string::npos) << info.err;
 }
 
+// A command that ends early (here a fit refused for its gouge, after some tens of ms) while
+// the CAD module it preloaded is still opening waits for it before the process exits: exit's
+// destructors must not run under the opening thread. The slow stand-in module aborts the
+// process if they do (tests/slow_cad_module.cpp; seen with the real module as a segfault in
+// about one run in twenty).
+TEST_F(CadIo, ACommandEndingWhileTheModuleOpensWaitsForIt) {
+  const fs::path mesh = dir_ / "part.stl";
+  ASSERT_EQ(cli_test::run("synth --guides seed003 --tool cylinder:5 --resolution 61x21 -o " + mesh.string()).code, 0);
+  ::setenv("FLANK_CAD_MODULE", FLANK_SLOW_CAD_MODULE, 1);
+  struct Unset {
+    ~Unset() { ::unsetenv("FLANK_CAD_MODULE"); }
+  } unset;
+  const fs::path out = dir_ / "out";
+  const cli_test::CliRun r = cli_test::run("fit " + mesh.string() + " " + cli_test::kLine +
+                                           " --samples-t 8 --samples-s 4 -q -o " + out.string());
+  EXPECT_EQ(r.code, 1) << r.err;
+  expect_clean_failure(r, "gouge", out);
+}
+
 // A real run: patches.step read back agrees with envelopes.ply and with Ω rebuilt from
 // patches.json (its motion and cutter, through the forward model) within 1% of the tolerance, and tools.step's solids with
 // the meridian in patches.json within 1e-6 mm.
