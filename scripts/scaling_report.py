@@ -36,6 +36,8 @@ TIME_TYPE_PARTS = {"real_time", "manual_time", "process_time"}
 AGGREGATE_SUFFIX = re.compile(r"_(mean|median|stddev|cv)$")
 LADDER_KEY = re.compile(
     r"^Ladder/(?P<stage>[^/]+)/(?P<part>[^/]+)/tri_k:(?P<tri_k>\d+)/threads:(?P<threads>\d+)$")
+# bench/fork_join_benchmark.cpp at two threads: one fork and join after an idle spell.
+FORK_JOIN_KEY = re.compile(r"^BM_ForkJoin/work_us:(?P<work>\d+)/idle_us:\d+/threads:2$")
 # Keys of a Google Benchmark entry that are not user counters.
 STANDARD_KEYS = {
     "name", "family_index", "per_family_instance_index", "run_name", "run_type",
@@ -228,6 +230,22 @@ def parallel_efficiency(t1, t2, threads=2):
     return _div(t1, None if t2 is None else threads * t2)
 
 
+def fork_join_cost(benches):
+    """What one fork and join of two threads costs on this machine, in seconds: the median over
+    BM_ForkJoin's task lengths of the two-thread time's excess over one task, or None."""
+    excess = [b.real_s - int(m["work"]) * 1e-6 for key, b in benches.items()
+              if (m := FORK_JOIN_KEY.match(key)) and b.real_s is not None]
+    return statistics.median(excess) if excess else None
+
+
+def efficiency_ceiling(t1, cost):
+    """The best efficiency a stage of one thread's time t1 can reach with a single fork and
+    join of that cost: t1 / (2 · (t1 / 2 + cost)). Stages that fork more reach less."""
+    if t1 is None or cost is None or t1 + 2 * cost <= 0:
+        return None
+    return t1 / (t1 + 2 * cost)
+
+
 def unavoidable_query_s(gn_iterations, samples, raw_qps):
     """Time the fit's closest-point queries take at the raw cold query rate."""
     if gn_iterations is None or samples is None:
@@ -345,8 +363,10 @@ def paired(t1s, t2s, formula):
 def parallel_rows(benches):
     """Speed-up and efficiency for every key with threads:1 and threads:2 runs: the median of
     the per-repetition ratios where both have two or more repetitions, else the ratio of the
-    medians ("pairs" 0)."""
+    medians ("pairs" 0); "ceiling" is what one fork and join's cost (fork_join_cost) leaves
+    a stage of that length at best, None without BM_ForkJoin in the run."""
     rows = []
+    cost = fork_join_cost(benches)
     for key in ordered_keys(benches):
         b1 = benches[key]
         if not key.endswith("/threads:1"):
@@ -356,7 +376,8 @@ def parallel_rows(benches):
         if b2 is None:
             continue
         row = {"benchmark": base, "stage": b1.stage, "part": b1.part, "tri_k": b1.tri_k,
-               "triangles": b1.triangles, "t1_s": b1.real_s, "t2_s": b2.real_s, "pairs": 0}
+               "triangles": b1.triangles, "t1_s": b1.real_s, "t2_s": b2.real_s, "pairs": 0,
+               "ceiling": efficiency_ceiling(b1.real_s, cost)}
         for name, formula in (("speedup", speedup), ("efficiency", parallel_efficiency)):
             value, pairs = paired(b1.reals, b2.reals, formula)
             row[name] = value if pairs else formula(b1.real_s, b2.real_s)
@@ -754,10 +775,19 @@ def build_markdown(title, run_path, context, benches, base_path, base, lad):
             "median over the repetitions of each one's ratio (its 1- and 2-thread runs back to "
             "back in one process), so that the machine's drift over the run stays out of it; "
             "the times shown are the medians.", ""]
+    cost = fork_join_cost(benches)
+    if cost is not None:
+        out += [f"One fork and join of two threads, after the other thread was idle, costs "
+                f"{human_time(cost)} on this machine (`BM_ForkJoin`: two spun tasks; the "
+                f"two-thread time's excess over one task, median over the task lengths). A stage "
+                f"that forks once reaches at best t1 ÷ (t1 + 2 × that): 0.9 needs "
+                f"t1 ≥ {human_time(18 * cost)}. The ceiling column is that bound for each row; "
+                f"where the efficiency is under 0.9 and so is the ceiling, the stage is too short "
+                f"for this machine's thread wake-ups, whatever its code.", ""]
     out.append(md_table(
-        ["benchmark", "t (1 thread)", "t (2 threads)", "speed-up", "efficiency", "pairs"],
+        ["benchmark", "t (1 thread)", "t (2 threads)", "speed-up", "efficiency", "ceiling", "pairs"],
         [[f"`{r['benchmark']}`", human_time(r["t1_s"]), human_time(r["t2_s"]),
-          sig3(r["speedup"]), sig3(r["efficiency"]), str(r["pairs"] or "medians")]
+          sig3(r["speedup"]), sig3(r["efficiency"]), sig3(r["ceiling"]), str(r["pairs"] or "medians")]
          for r in parallel_rows(benches)]))
 
     out += ["", "### Fit time vs unavoidable query time", "",

@@ -184,6 +184,36 @@ class ScalingReportTest(unittest.TestCase):
         self.assertEqual(par["Ladder/index/cone/tri_k:4"]["pairs"], 0)
         self.assertAlmostEqual(par["Ladder/index/cone/tri_k:4"]["efficiency"], 1 / (2 * 0.55))
 
+    def test_fork_join_sets_each_stage_a_ceiling(self):
+        # One fork and join cost 90 µs over one task at every task length (0.1-2 ms); the 1k
+        # index takes 0.2 ms on one thread, 0.19 ms on two: under 0.9, and so is its ceiling.
+        runs = {}
+        for work in (100, 500, 2000):
+            for threads, ms in ((1, 2 * work / 1e3), (2, (work + 90) / 1e3)):
+                runs[f"BM_ForkJoin/work_us:{work}/idle_us:1000/threads:{threads}"] = (ms, 0.01, {})
+        runs["Ladder/index/cone/tri_k:1/threads:1"] = (0.2, 0.01, {"triangles": 968})
+        runs["Ladder/index/cone/tri_k:1/threads:2"] = (0.19, 0.01, {"triangles": 968})
+        _, benches = sr.load_run(self.write("fj.json", gb_json(runs)))
+        self.assertAlmostEqual(sr.fork_join_cost(benches), 90e-6)
+        par = {r["benchmark"]: r for r in sr.parallel_rows(benches)}
+        index = par["Ladder/index/cone/tri_k:1"]
+        self.assertAlmostEqual(index["ceiling"], 0.2e-3 / (0.2e-3 + 180e-6))
+        self.assertLess(index["ceiling"], 0.9)
+        # The benchmark's own rows: the ceiling is its efficiency, by construction.
+        fj = par["BM_ForkJoin/work_us:2000/idle_us:1000"]
+        self.assertAlmostEqual(fj["ceiling"], fj["efficiency"])
+        # 0.9 needs t1 >= 18 x the cost: 1.62 ms here.
+        self.assertAlmostEqual(sr.efficiency_ceiling(18 * 90e-6, 90e-6), 0.9)
+        md = sr.build_markdown("t", "run.json", {}, benches, None, None, sr.ladder(benches))
+        self.assertIn("costs 90.0 µs on this machine", md)
+        self.assertIn("0.9 needs t1 ≥ 1.62 ms", md)
+        # Without the benchmark in the run: no ceiling, and the table says so.
+        del benches["BM_ForkJoin/work_us:100/idle_us:1000/threads:2"]
+        del benches["BM_ForkJoin/work_us:500/idle_us:1000/threads:2"]
+        del benches["BM_ForkJoin/work_us:2000/idle_us:1000/threads:2"]
+        self.assertIsNone(sr.fork_join_cost(benches))
+        self.assertIsNone(sr.parallel_rows(benches)[0]["ceiling"])
+
     def test_merge_bad_input(self):
         good = self.write("good.json", self.iteration_run(10.0, 100.0))
         bad = self.write("bad.json", "{ truncated")
