@@ -7,9 +7,10 @@
 // The scaling report turns the two-thread time's excess over `work` into the ceiling a stage
 // of a given length can reach (scripts/scaling_report.py, "Parallel efficiency").
 //
-// On the 2-core virtual machines here (2026-11-28, a throwaway oneTBB program alike) the excess
-// was 85-95 µs whatever the work, of which ~33 µs until the other thread started: a stage
-// that forks once needs about 1.6 ms of one thread's work to reach an efficiency of 0.9.
+// On the 2-core virtual machines here (2026-11-28) the excess was 83-94 µs whatever the work;
+// in a throwaway oneTBB program the other thread started 79-83 µs after a task_group's fork
+// (the idle vCPU's wake-up). A stage that forks once then needs about 1.6 ms of one thread's
+// work to reach an efficiency of 0.9.
 #include <benchmark/benchmark.h>
 
 #include <chrono>
