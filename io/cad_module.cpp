@@ -23,26 +23,31 @@
 #include <GeomAPI_PointsToBSplineSurface.hxx>
 #include <Geom_BSplineSurface.hxx>
 #include <Geom_Surface.hxx>
-#include <IGESCAFControl_Reader.hxx>
-#include <IGESCAFControl_Writer.hxx>
+#include <IGESBasic_Name.hxx>
 #include <IGESControl_Controller.hxx>
+#include <IGESControl_Reader.hxx>
+#include <IGESControl_Writer.hxx>
+#include <IGESData_IGESEntity.hxx>
+#include <Interface_InterfaceModel.hxx>
 #include <Interface_Static.hxx>
 #include <Message.hxx>
 #include <Message_Messenger.hxx>
 #include <Message_PrinterOStream.hxx>
 #include <Poly_Triangulation.hxx>
-#include <STEPCAFControl_Reader.hxx>
-#include <STEPCAFControl_Writer.hxx>
 #include <STEPControl_Controller.hxx>
+#include <STEPControl_Reader.hxx>
+#include <STEPControl_Writer.hxx>
+#include <StepBasic_Product.hxx>
+#include <StepBasic_ProductDefinition.hxx>
+#include <StepBasic_ProductDefinitionFormation.hxx>
+#include <StepData_StepModel.hxx>
 #include <Standard_Failure.hxx>
 #include <TColStd_Array1OfInteger.hxx>
 #include <TColStd_Array1OfReal.hxx>
 #include <TColgp_Array2OfPnt.hxx>
+#include <TCollection_ExtendedString.hxx>
+#include <TCollection_HAsciiString.hxx>
 #include <TColgp_HArray1OfPnt.hxx>
-#include <TDF_Label.hxx>
-#include <TDF_LabelSequence.hxx>
-#include <TDataStd_Name.hxx>
-#include <TDocStd_Document.hxx>
 #include <TopExp.hxx>
 #include <TopExp_Explorer.hxx>
 #include <TopLoc_Location.hxx>
@@ -50,9 +55,11 @@
 #include <TopoDS.hxx>
 #include <TopoDS_Compound.hxx>
 #include <TopoDS_Face.hxx>
-#include <XCAFApp_Application.hxx>
-#include <XCAFDoc_DocumentTool.hxx>
-#include <XCAFDoc_ShapeTool.hxx>
+#include <TransferBRep.hxx>
+#include <TransferBRep_ShapeMapper.hxx>
+#include <Transfer_FinderProcess.hxx>
+#include <XSControl_TransferReader.hxx>
+#include <XSControl_WorkSession.hxx>
 #include <gp_Ax1.hxx>
 #include <gp_Pln.hxx>
 
@@ -139,32 +146,53 @@ std::string surface_kind(const TopoDS_Face& face) {
   }
 }
 
-// An XCAF document, closed when it goes out of scope: the application keeps every open
-// document (and its shapes) alive until it is closed.
-class Document {
- public:
-  Document() { XCAFApp_Application::GetApplication()->NewDocument("MDTV-XCAF", doc_); }
-  ~Document() {
-    if (!doc_.IsNull() && doc_->IsOpened()) XCAFApp_Application::GetApplication()->Close(doc_);
-  }
-  Document(const Document&) = delete;
-  Document& operator=(const Document&) = delete;
-  Handle(TDocStd_Document)& get() { return doc_; }
+// Shapes with their names, in the order they are written or were read. Names travel as STEP
+// product names and IGES entity names; OCCT's XCAF documents could carry them too, but bring
+// 43 more libraries (the 3D viewer's, X11, images, fonts) that took a third of the module's
+// opening: 85 -> 51 ms of CPU (twenty-seventh part of issue 13, README).
+using NamedShapes = std::vector<std::pair<TopoDS_Shape, std::string>>;
 
- private:
-  Handle(TDocStd_Document) doc_;
-};
-
-std::string label_name(const TDF_Label& label) {
-  Handle(TDataStd_Name) name;
-  if (!label.FindAttribute(TDataStd_Name::GetID(), name)) return {};
-  const TCollection_ExtendedString& text = name->Get();
+// A name as flank shows it: decoded from UTF-8 (as OCCT's readers store STEP and IGES text),
+// one line, every character beyond ASCII a '?'.
+std::string display_name(const Handle(TCollection_HAsciiString)& text) {
+  if (text.IsNull()) return {};
+  const TCollection_ExtendedString wide(text->ToCString(), /*isMultiByte=*/Standard_True);
   std::string out;
-  for (int k = 1; k <= text.Length(); ++k) {
-    const auto c = static_cast<unsigned>(text.Value(k));
+  for (int k = 1; k <= wide.Length(); ++k) {
+    const auto c = static_cast<unsigned>(wide.Value(k));
     out += c < 0x80 ? static_cast<char>(c) : '?';
   }
   return one_line(out);
+}
+
+// A STEP root's name: its product's name, else the product's id (as a product without a name
+// is named by CAD systems), else none.
+std::string step_root_name(const Handle(Standard_Transient)& root) {
+  const Handle(StepBasic_ProductDefinition) definition = Handle(StepBasic_ProductDefinition)::DownCast(root);
+  if (definition.IsNull() || definition->Formation().IsNull()) return {};
+  const Handle(StepBasic_Product) product = definition->Formation()->OfProduct();
+  if (product.IsNull()) return {};
+  if (!product->Name().IsNull() && product->Name()->UsefullLength() > 0) return display_name(product->Name());
+  return display_name(product->Id());
+}
+
+// An IGES root's name: its name property (406 form 15), else its short label.
+std::string iges_root_name(const Handle(Standard_Transient)& root) {
+  const Handle(IGESData_IGESEntity) entity = Handle(IGESData_IGESEntity)::DownCast(root);
+  if (entity.IsNull() || !entity->HasName()) return {};
+  return display_name(entity->NameValue());
+}
+
+// The roots the reader transferred, each with its shape and name, in the file's order.
+NamedShapes transferred_roots(XSControl_Reader& reader, std::string (*name_of)(const Handle(Standard_Transient)&)) {
+  const Handle(XSControl_TransferReader) transfer = reader.WS()->TransferReader();
+  NamedShapes roots;
+  for (int k = 1; k <= reader.NbRootsForTransfer(); ++k) {
+    const Handle(Standard_Transient) root = reader.RootForTransfer(k);
+    const TopoDS_Shape shape = transfer->ShapeResult(root);
+    if (!shape.IsNull()) roots.emplace_back(shape, name_of(root));
+  }
+  return roots;
 }
 
 std::shared_ptr<const Shape> read(const std::string& path, bool step, std::vector<CadFace>& faces,
@@ -172,40 +200,26 @@ std::shared_ptr<const Shape> read(const std::string& path, bool step, std::vecto
   quiet_occt();
   auto impl = std::make_shared<Shape>();
 
-  Document document;
-  Handle(TDocStd_Document)& doc = document.get();
+  NamedShapes named;
   guarded(path, std::string("reading ") + (step ? "STEP" : "IGES"), [&] {
     // Read, then transfer: a file OCCT parses but that holds no shape has no faces.
-    bool read = false, transferred = false;
-    if (step) {
-      STEPCAFControl_Reader reader;
-      reader.SetNameMode(true);
-      read = reader.ReadFile(path.c_str()) == IFSelect_RetDone;
-      transferred = read && reader.Transfer(doc);
-    } else {
-      IGESCAFControl_Reader reader;
-      reader.SetNameMode(true);
-      read = reader.ReadFile(path.c_str()) == IFSelect_RetDone;
-      transferred = read && reader.Transfer(doc);
-    }
-    if (!read) fail(path, std::string("not a readable ") + (step ? "STEP" : "IGES") + " file");
-    if (!transferred) fail(path, std::string("no faces in this ") + (step ? "STEP" : "IGES") + " file (no shape to read)");
+    std::unique_ptr<XSControl_Reader> reader;
+    if (step)
+      reader = std::make_unique<STEPControl_Reader>();
+    else
+      reader = std::make_unique<IGESControl_Reader>();
+    if (reader->ReadFile(path.c_str()) != IFSelect_RetDone)
+      fail(path, std::string("not a readable ") + (step ? "STEP" : "IGES") + " file");
+    reader->TransferRoots();
+    named = transferred_roots(*reader, step ? step_root_name : iges_root_name);
+    if (named.empty()) fail(path, std::string("no faces in this ") + (step ? "STEP" : "IGES") + " file (no shape to read)");
     return 0;
   });
 
-  Handle(XCAFDoc_ShapeTool) shapes = XCAFDoc_DocumentTool::ShapeTool(doc->Main());
-  TDF_LabelSequence roots;
-  shapes->GetFreeShapes(roots);
   TopoDS_Compound all;
   BRep_Builder builder;
   builder.MakeCompound(all);
-  std::vector<std::pair<TopoDS_Shape, std::string>> named;
-  for (int k = 1; k <= roots.Length(); ++k) {
-    const TopoDS_Shape s = XCAFDoc_ShapeTool::GetShape(roots.Value(k));
-    if (s.IsNull()) continue;
-    builder.Add(all, s);
-    named.emplace_back(s, label_name(roots.Value(k)));
-  }
+  for (const auto& [s, name] : named) builder.Add(all, s);
   impl->shape = all;
   TopExp::MapShapes(all, TopAbs_FACE, impl->face_map);
   const int n = impl->face_map.Extent();
@@ -394,9 +408,9 @@ void size(const Surface& s, int& poles_u, int& poles_v, int& degree_u, int& degr
   degree_v = s.surface->VDegree();
 }
 
-// The bytes of the named shapes of `doc` as STEP or IGES (by extension), written through a
+// The bytes of the named shapes as STEP or IGES (by extension), written through a
 // temporary file; io/cad.cpp moves them into place with write_file_atomic.
-std::string document_bytes(const fs::path& path, const Handle(TDocStd_Document)& doc) {
+std::string document_bytes(const fs::path& path, const NamedShapes& shapes) {
   const std::string name = path.string();
   const std::string ext = lower_extension(path);
   const bool step = step_extension(ext);  // else IGES (io/cad.cpp checked)
@@ -416,15 +430,58 @@ std::string document_bytes(const fs::path& path, const Handle(TDocStd_Document)&
     if (step) {
       Interface_Static::SetCVal("write.step.schema", "AP214IS");
       Interface_Static::SetCVal("write.step.unit", "MM");
-      STEPCAFControl_Writer writer;
-      writer.SetNameMode(true);
-      done = writer.Transfer(doc, STEPControl_AsIs) && writer.Write(scratch_path.c_str()) == IFSelect_RetDone;
+      STEPControl_Writer writer;
+      done = true;
+      // Each shape its own product, named by its name (its id too): the one product each
+      // transfer adds, found among the entities it added.
+      for (const auto& [shape, shape_name] : shapes) {
+        const int before = writer.Model()->NbEntities();
+        if (writer.Transfer(shape, STEPControl_AsIs) != IFSelect_RetDone) {
+          done = false;
+          break;
+        }
+        const Handle(TCollection_HAsciiString) text = new TCollection_HAsciiString(shape_name.c_str());
+        int named = 0;
+        for (int k = before + 1; k <= writer.Model()->NbEntities(); ++k)
+          if (const Handle(StepBasic_Product) product = Handle(StepBasic_Product)::DownCast(writer.Model()->Value(k));
+              !product.IsNull()) {
+            product->SetId(text);
+            product->SetName(text);
+            ++named;
+          }
+        if (named != 1) fail(name, "'" + one_line(shape_name) + "' became " + std::to_string(named) + " STEP products, not one");
+      }
+      done = done && writer.Write(scratch_path.c_str()) == IFSelect_RetDone;
     } else {
       Interface_Static::SetCVal("write.iges.unit", "MM");
       Interface_Static::SetIVal("write.iges.brep.mode", 1);
-      IGESCAFControl_Writer writer;
-      writer.SetNameMode(true);
-      done = writer.Transfer(doc) && writer.Write(scratch_path.c_str());
+      IGESControl_Writer writer;
+      done = true;
+      for (const auto& [shape, shape_name] : shapes) done = done && writer.AddShape(shape);
+      // IGES names: the entity's short label (8 characters, right-aligned; the first 8 of a
+      // longer name) and the whole name in a name property (entity 406, form 15).
+      const Handle(Transfer_FinderProcess) finder = writer.TransferProcess();
+      for (const auto& [shape, shape_name] : shapes) {
+        Handle(IGESData_IGESEntity) entity;
+        if (!done || !finder->FindTypedTransient(TransferBRep::ShapeMapper(finder, shape),
+                                                 STANDARD_TYPE(IGESData_IGESEntity), entity))
+          continue;
+        const auto ascii = [&](char other) {
+          std::string out = shape_name;
+          for (char& c : out)
+            if (static_cast<unsigned char>(c) >= 0x80) c = other;
+          return out;
+        };
+        const std::size_t shown = std::min<std::size_t>(shape_name.size(), 8);
+        const std::string label = std::string(8 - shown, ' ') + ascii('?').substr(0, shown);
+        entity->SetLabel(new TCollection_HAsciiString(label.c_str()));
+        const Handle(IGESBasic_Name) long_name = new IGESBasic_Name;
+        long_name->Init(1, new TCollection_HAsciiString(ascii('_').c_str()));
+        entity->AddProperty(long_name);
+        writer.AddEntity(long_name);
+      }
+      writer.ComputeModel();
+      done = done && writer.Write(scratch_path.c_str());
     }
     if (!done) fail(name, "OCCT could not write the file");
     return 0;
@@ -469,33 +526,25 @@ std::string document_bytes(const fs::path& path, const Handle(TDocStd_Document)&
   return text;
 }
 
-void add_named(const Handle(TDocStd_Document)& doc, const TopoDS_Shape& shape, const std::string& name) {
-  Handle(XCAFDoc_ShapeTool) shapes = XCAFDoc_DocumentTool::ShapeTool(doc->Main());
-  const TDF_Label label = shapes->AddShape(shape, /*makeAssembly=*/false);
-  TDataStd_Name::Set(label, TCollection_ExtendedString(name.c_str()));
-}
-
 std::string surfaces_file(const std::string& path, const std::vector<std::pair<std::string, const Surface*>>& surfaces) {
   quiet_occt();
   const std::string& name = path;
-  Document document;
-  Handle(TDocStd_Document)& doc = document.get();
+  NamedShapes shapes;
   guarded(name, "building faces", [&] {
     for (const auto& [face_name, surface] : surfaces) {
       BRepBuilderAPI_MakeFace face(surface->surface, 1e-7);
       if (!face.IsDone()) fail(name, "cannot make a face of surface '" + one_line(face_name) + "'");
-      add_named(doc, face.Face(), face_name);
+      shapes.emplace_back(face.Face(), face_name);
     }
     return 0;
   });
-  return document_bytes(path, doc);
+  return document_bytes(path, shapes);
 }
 
 std::string solids_file(const std::string& path, const std::vector<RevolvedSolid>& solids) {
   quiet_occt();
   const std::string& name = path;
-  Document document;
-  Handle(TDocStd_Document)& doc = document.get();
+  NamedShapes shapes;
   guarded(name, "building solids", [&] {
     for (const RevolvedSolid& s : solids) {
       const auto n = s.meridian.size();
@@ -528,22 +577,22 @@ std::string solids_file(const std::string& path, const std::vector<RevolvedSolid
       BRepPrimAPI_MakeRevol revol(profile.Face(), gp_Ax1(pnt(s.origin), gp_Dir(axis.x(), axis.y(), axis.z())));
       revol.Build();
       if (!revol.IsDone()) fail(name, "solid '" + one_line(s.name) + "': the revolution failed");
-      add_named(doc, revol.Shape(), s.name);
+      shapes.emplace_back(revol.Shape(), s.name);
     }
     return 0;
   });
-  return document_bytes(path, doc);
+  return document_bytes(path, shapes);
 }
 
 // What every first translation would otherwise do on the command's path: the translators'
-// set-up (quiet_occt) and the document application with its resources, made once here, on
-// the thread that opens the module (io/cad.cpp: beside the command's own work). Nothing may
+// set-up (quiet_occt) and a STEP writer's session with its resources, made once here, on the
+// thread that opens the module (io/cad.cpp: beside the command's own work). Nothing may
 // escape the module's entry: should Open CASCADE fail here, the translation that needs it
 // fails again later, where its error names the file.
 void warm_up() noexcept {
   try {
     quiet_occt();
-    Document document;
+    const STEPControl_Writer writer;
   } catch (...) {
   }
 }

@@ -48,13 +48,15 @@ using testing::slurp;
 
 class CadIo : public Cli {};
 
-// Whether Open CASCADE's kernel library is mapped into this process.
-bool occt_mapped() {
+// Whether a library whose name holds `name` is mapped into this process.
+bool mapped(const std::string& name) {
   std::ifstream maps("/proc/self/maps");
   for (std::string line; std::getline(maps, line);)
-    if (line.find("libTKernel") != std::string::npos) return true;
+    if (line.find(name) != std::string::npos) return true;
   return false;
 }
+// Whether Open CASCADE's kernel library is mapped into this process.
+bool occt_mapped() { return mapped("libTKernel"); }
 // Read before main, before any test could open the CAD module.
 const bool kOcctBeforeMain = occt_mapped();
 
@@ -68,6 +70,10 @@ TEST(CadModule, OpenCascadeComesWithTheModuleNotWithTheProgram) {
   EXPECT_TRUE(occt_mapped());
   EXPECT_NEAR(s.point(0.0, 0.0).x(), 10.0, 1e-9);
   io::require_cad_module("again");
+  // Names travel without OCCT's XCAF documents, whose libraries (the 3D viewer's among them)
+  // were a third of the module's opening: none of them comes with it.
+  for (const char* library : {"libTKXCAF", "libTKLCAF", "libTKV3d", "libTKService"})
+    EXPECT_FALSE(mapped(library)) << library;
 }
 
 TEST_F(CadIo, SplineSurfaceFollowsTheExactSurfaceBetweenItsPoints) {
@@ -324,6 +330,26 @@ TEST_F(CadIo, FacesReadBackAsWrittenInStepAndIges) {
     io::write_surfaces(path, {{"P7", f.surface}});
     EXPECT_EQ(slurp(path), first);
   }
+}
+
+// Several named faces in one file, as patches.step holds them: read back in the order written,
+// each with its own name, whatever its length or characters (IGES keeps the whole name in a
+// name property beside the 8-character label).
+TEST_F(CadIo, EveryFaceKeepsItsNameInOrder) {
+  const report::FittedSurface f = report::fit_exact_grid("cylinder", cylinder_grid(20, 6), 20, 6, 1e-7);
+  const report::FittedSurface g = report::fit_exact_grid("cylinder", cylinder_grid(20, 6, 30.0), 20, 6, 1e-7);
+  const std::vector<std::string> names = {"P0", "a_face_named_at_length", "P 2"};
+  for (const char* file : {"faces.step", "faces.igs"}) {
+    SCOPED_TRACE(file);
+    const fs::path path = dir_ / file;
+    io::write_surfaces(path, {{names[0], f.surface}, {names[1], g.surface}, {names[2], f.surface}});
+    const io::CadPart part = io::CadPart::read(path.string());
+    ASSERT_EQ(part.faces().size(), 3u);
+    for (int i = 1; i <= 3; ++i) EXPECT_EQ(part.face_name(i), names[static_cast<std::size_t>(i - 1)]);
+    EXPECT_NEAR(part.face_point(2, 0.0, 0.0).z(), g.surface.point(0.0, 0.0).z(), 1e-9);
+  }
+  EXPECT_NE(slurp(dir_ / "faces.step").find("PRODUCT('a_face_named_at_length','a_face_named_at_length'"),
+            std::string::npos);
 }
 
 TEST_F(CadIo, SolidOfRevolutionFollowsItsMeridian) {
