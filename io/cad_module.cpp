@@ -408,6 +408,13 @@ void size(const Surface& s, int& poles_u, int& poles_v, int& degree_u, int& degr
   degree_v = s.surface->VDegree();
 }
 
+// `text` with every byte beyond ASCII replaced by `other`.
+std::string ascii_only(std::string text, char other) {
+  for (char& c : text)
+    if (static_cast<unsigned char>(c) >= 0x80) c = other;
+  return text;
+}
+
 // The bytes of the named shapes as STEP or IGES (by extension), written through a
 // temporary file; io/cad.cpp moves them into place with write_file_atomic.
 std::string document_bytes(const fs::path& path, const NamedShapes& shapes) {
@@ -466,17 +473,11 @@ std::string document_bytes(const fs::path& path, const NamedShapes& shapes) {
         if (!done || !finder->FindTypedTransient(TransferBRep::ShapeMapper(finder, shape),
                                                  STANDARD_TYPE(IGESData_IGESEntity), entity))
           continue;
-        const auto ascii = [&](char other) {
-          std::string out = shape_name;
-          for (char& c : out)
-            if (static_cast<unsigned char>(c) >= 0x80) c = other;
-          return out;
-        };
         const std::size_t shown = std::min<std::size_t>(shape_name.size(), 8);
-        const std::string label = std::string(8 - shown, ' ') + ascii('?').substr(0, shown);
+        const std::string label = std::string(8 - shown, ' ') + ascii_only(shape_name, '?').substr(0, shown);
         entity->SetLabel(new TCollection_HAsciiString(label.c_str()));
         const Handle(IGESBasic_Name) long_name = new IGESBasic_Name;
-        long_name->Init(1, new TCollection_HAsciiString(ascii('_').c_str()));
+        long_name->Init(1, new TCollection_HAsciiString(ascii_only(shape_name, '_').c_str()));
         entity->AddProperty(long_name);
         writer.AddEntity(long_name);
       }
