@@ -148,12 +148,13 @@ std::string surface_kind(const TopoDS_Face& face) {
 
 // Shapes with their names, in the order they are written or were read. Names travel as STEP
 // product names and IGES entity names; OCCT's XCAF documents could carry them too, but bring
-// 43 more libraries (the 3D viewer's, X11, images, fonts) that took a third of the module's
-// opening: 85 -> 51 ms of CPU (twenty-seventh part of issue 13, README).
+// 43 more libraries (the 3D viewer's, X11, images, fonts): 40% of the module's opening (85 ->
+// 51 ms of CPU for a stub linked to each set; twenty-seventh part of issue 13, README).
 using NamedShapes = std::vector<std::pair<TopoDS_Shape, std::string>>;
 
-// A name as flank shows it: decoded from UTF-8 (as OCCT's readers store STEP and IGES text),
-// one line, every character beyond ASCII a '?'.
+// A name as flank shows it: decoded as UTF-8 (OCCT's STEP reader converts the file's encoded
+// strings to it; ASCII, as IGES names are, reads the same), one line, every character beyond
+// ASCII a '?'.
 std::string display_name(const Handle(TCollection_HAsciiString)& text) {
   if (text.IsNull()) return {};
   const TCollection_ExtendedString wide(text->ToCString(), /*isMultiByte=*/Standard_True);

@@ -333,8 +333,8 @@ TEST_F(CadIo, FacesReadBackAsWrittenInStepAndIges) {
 }
 
 // Several named faces in one file, as patches.step holds them: read back in the order written,
-// each with its own name, whatever its length or characters (IGES keeps the whole name in a
-// name property beside the 8-character label).
+// each with its own name, whatever its length, spaces and underscores included (IGES keeps the
+// whole name in a name property beside the 8-character label).
 TEST_F(CadIo, EveryFaceKeepsItsNameInOrder) {
   const report::FittedSurface f = report::fit_exact_grid("cylinder", cylinder_grid(20, 6), 20, 6, 1e-7);
   const report::FittedSurface g = report::fit_exact_grid("cylinder", cylinder_grid(20, 6, 30.0), 20, 6, 1e-7);
