@@ -488,6 +488,26 @@ TEST_F(CadIo, CommandLineRefusesBadCadAndListsFaces) {
   EXPECT_EQ(mesh_faces.code, 2);
 }
 
+// A tolerance far finer than a face needs is refused from coarse looks, in one line naming
+// the file, before any tessellation that could exhaust memory: at 1e-7 mm the cylinder would
+// take hundreds of millions of triangles, which the old loop asked OCCT for outright (a
+// synthesised face at 1e-4 mm had reached 24 GB after 9 minutes).
+TEST_F(CadIo, ToleranceTooFineForTheFacesIsRefusedBeforeTessellating) {
+  const report::FittedSurface f = report::fit_exact_grid("cylinder", cylinder_grid(20, 6), 20, 6, 1e-7);
+  const fs::path part = dir_ / "part.step";
+  io::write_surfaces(part, {{"face", f.surface}});
+  const cli_test::CliRun info = cli_test::run("info " + part.string() + " --tolerance 1e-7");
+  const fs::path out = dir_ / "out";
+  expect_clean_failure(info, part.string() + ": a chord deviation under a tenth of the tolerance (1e-08 mm) would take about ",
+                       out);
+  EXPECT_NE(info.err.find("pass a larger --tolerance or fewer --faces"), std::string::npos) << info.err;
+  const cli_test::CliRun r = cli_test::run("decompose " + part.string() + " --tolerance 1e-7 -q -o " + out.string());
+  EXPECT_EQ(r.code, 2);
+  expect_clean_failure(r, part.string() + ": a chord deviation under a tenth of the tolerance", out);
+  // A sane tolerance on the same file reads.
+  EXPECT_EQ(cli_test::run("info " + part.string() + " --tolerance-rel 1e-3").code, 0);
+}
+
 // An installation without the CAD module (libflank_cad.so lost): what needs no CAD runs; a
 // STEP input, and decompose's patches.step, are refused in one line naming the file and the
 // module, with nothing written.
