@@ -224,9 +224,9 @@ io::CadTessellation tessellate_within(const io::CadPart& part, const std::vector
   // OCCT's deflection is a target, not a bound (on the fitted faces of HECC a's patches.step
   // the chord deviation measured 5 to 45 times the deflection asked). Over a tenth of the
   // tolerance, ask again for half, a few times at most; each halving roughly doubles the
-  // triangles, so stop before a tessellation would outgrow what the rest can work with. (Not
-  // when one halving does not help: OCCT's deviation is not monotone in what it is asked, and
-  // the next halving may meet the tenth where this one missed.)
+  // triangles, so stop before a tessellation would outgrow what the rest can work with. A
+  // halving that does not help does not end the search: OCCT's deviation is not always
+  // monotone in the deflection asked, and the next halving may meet the tenth.
   for (int again = 0; again < 4 && std::isfinite(t.deviation) && t.deviation > bound; ++again) {
     const double predicted = 2.0 * t.mesh.mesh.face_count();
     if (predicted > kMaxCadTriangles) throw refuse(predicted);
