@@ -28,6 +28,7 @@
 #include <IGESControl_Reader.hxx>
 #include <IGESControl_Writer.hxx>
 #include <IGESData_IGESEntity.hxx>
+#include <IMeshTools_Parameters.hxx>
 #include <Interface_InterfaceModel.hxx>
 #include <Interface_Static.hxx>
 #include <Message.hxx>
@@ -269,9 +270,26 @@ void tessellate(const Shape& shape, const std::string& path, const std::vector<i
     sewing.Perform();
     TopoDS_Shape sewn = sewing.SewedShape();
     if (sewn.IsNull()) fail(path, "sewing the faces gave no shape");
-    BRepMesh_IncrementalMesh mesher(sewn, deviation, /*isRelative=*/false, /*angle=*/0.5,
-                                    /*inParallel=*/false);
+    // Delabella, OCCT's other Delaunay triangulator, gives meshes of the same quality and
+    // deviation as its default (Watson) many times faster on B-spline faces: Watson's circle
+    // search grows faster than its mesh (a cutter of tools.step: 11.5 s and 1.4 GB against
+    // 0.5 s and 47 MB, the same 14,499 nodes). A face it leaves bare gets Watson's mesh.
+    IMeshTools_Parameters parameters;
+    parameters.Deflection = deviation;
+    parameters.Angle = 0.5;
+    parameters.Relative = false;
+    parameters.InParallel = false;
+    parameters.MeshAlgo = IMeshTools_MeshAlgoType_Delabella;
+    BRepMesh_IncrementalMesh mesher(sewn, parameters);
     if (!mesher.IsDone()) fail(path, "tessellation failed");
+    for (TopExp_Explorer e(sewn, TopAbs_FACE); e.More(); e.Next()) {
+      const TopoDS_Face& face = TopoDS::Face(e.Current());
+      TopLoc_Location loc;
+      if (!BRep_Tool::Triangulation(face, loc).IsNull()) continue;
+      IMeshTools_Parameters watson = parameters;
+      watson.MeshAlgo = IMeshTools_MeshAlgoType_Watson;
+      BRepMesh_IncrementalMesh again(face, watson);
+    }
     for (TopExp_Explorer e(sewn, TopAbs_FACE); e.More(); e.Next()) {
       const TopoDS_Face& face = TopoDS::Face(e.Current());
       TopLoc_Location loc;
