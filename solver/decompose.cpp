@@ -281,11 +281,13 @@ DecomposeResult decompose(const SurfaceIndex& index, const DecomposeOptions& o, 
     greedy_cover(pool, area, fco, &kept);
     return order_cover(pool, area, kept.picks);
   };
-  constexpr int kFinishPasses = 4;
+  constexpr int kFinishPasses = 4;  // step 5 runs at most this often (below)
   Cover final_cover;
-  bool seed_again = true;  // the rounds run in this pass
-  bool lost = false;       // a finish lost more than a round must gain
+  bool seed_again = true;   // the rounds run in this pass
+  bool met_target = false;  // the rounds last run ended as their (coarse) cover met the target
+  bool lost = false;        // a finish lost more than a round must gain
   for (int pass = 0;; ++pass) {
+    if (seed_again) met_target = false;
     for (int round = out.rounds; seed_again && round < o.max_rounds; ++round) {
       const std::size_t picks_before = cover.picks.size();
       const double fraction_before = cover.fraction();
@@ -566,8 +568,8 @@ DecomposeResult decompose(const SurfaceIndex& index, const DecomposeOptions& o, 
           // The coarse grid judged that patch; the finish (step 5) judges it on the fine grid, on
           // which it may cover less, and with its simplest cutter kind. Finished now, it ends the
           // round only if it still covers the target alone; otherwise the candidates after it
-          // are grown as if it had not (a free-form cutter grown first on a tessellated cone
-          // covered 95.7% coarse and 90.7% finished, where the cone line ranked next covers 99.8%).
+          // are grown as if it had not (on a cone face tessellated from IGES, a free-form
+          // cutter ranked first covered 95.7% coarse and 90.7% finished).
           if (alone < 0) break;
           finish_picks({alone});
           if (pool[static_cast<std::size_t>(alone)].covered_area >= target_area) break;
@@ -597,7 +599,8 @@ DecomposeResult decompose(const SurfaceIndex& index, const DecomposeOptions& o, 
       out.rounds = round + 1;
       say("round " + std::to_string(round + 1) + ": " + std::to_string(cover.picks.size()) + " patches cover " +
           std::to_string(100.0 * cover.fraction()) + "%");
-      if (cover.fraction() >= o.coverage_target || static_cast<int>(cover.picks.size()) >= o.max_patches) break;
+      met_target = cover.fraction() >= o.coverage_target;
+      if (met_target || static_cast<int>(cover.picks.size()) >= o.max_patches) break;
       // Nothing new covered: the next round would seed the same uncovered area the same way.
       if (cover.picks.size() == picks_before) break;
       if (round > 0 && cover.fraction() - fraction_before < o.min_round_gain) break;
@@ -608,29 +611,33 @@ DecomposeResult decompose(const SurfaceIndex& index, const DecomposeOptions& o, 
     finish_picks(cover.picks);
     auto t0 = Clock::now();
     Cover kept = kept_of(cover.picks);
-    const double best_before = pass == 0 ? -1.0 : final_cover.fraction();
     lost = lost || kept.fraction() < cover.fraction() - o.min_round_gain;
-    if (kept.fraction() > best_before) final_cover = std::move(kept);
+    if (pass == 0 || kept.fraction() > final_cover.fraction()) final_cover = std::move(kept);
     out.times.finish += since(t0);
     // Where the finish lost more than a round must gain (a pick with no valid patch on the fine
     // grid, or one cut back) and the target is missed, the pool is covered again with the
-    // finished patches as they are; new picks are finished, or, where there are none, the rounds
-    // go on over what is still uncovered (a few times at most). The best cover finished is
-    // kept. (A cylinder part tessellated from IGES: two patches covered 98.1% coarse, and the
-    // finish kept one, at 60.8%.)
-    if (final_cover.fraction() >= o.coverage_target || !lost || final_cover.fraction() <= best_before ||
-        pass == kFinishPasses)
-      break;
+    // finished patches as they are. Where that cover promises a round's gain over the finished
+    // one, its new picks are finished; otherwise, where the rounds ended only because their
+    // coarse cover met the target, they go on over what is still uncovered. A few passes at
+    // most; the best cover finished is kept. (A cylinder part tessellated from IGES: two
+    // patches covered 98.1% coarse, and the finish kept one, at 60.8%.)
+    if (final_cover.fraction() >= o.coverage_target || !lost || pass + 1 == kFinishPasses) break;
     Cover again = empty_cover(area);
     greedy_cover(pool, area, co, &again);
     improve_cover(pool, area, o.max_swaps, &again);
-    seed_again = std::all_of(again.picks.begin(), again.picks.end(),
-                             [&](int k) { return finished[static_cast<std::size_t>(k)] != 0; });
-    if (seed_again && out.rounds >= o.max_rounds) break;
+    const bool unfinished = std::any_of(again.picks.begin(), again.picks.end(),
+                                        [&](int k) { return finished[static_cast<std::size_t>(k)] == 0; });
+    if (unfinished && again.fraction() >= final_cover.fraction() + o.min_round_gain)
+      seed_again = false;
+    else if (met_target && out.rounds < o.max_rounds)
+      seed_again = true;
+    else
+      break;
     say("the finish covered " + std::to_string(100.0 * final_cover.fraction()) + "% of the " +
         std::to_string(100.0 * cover.fraction()) + "% chosen: " +
         (seed_again ? "the rounds go on" : "covered again with the finished patches"));
-    cover = std::move(again);
+    // The rounds go on from the best finished cover, every pick of it finished.
+    cover = seed_again ? final_cover : std::move(again);
   }
   const auto t0 = Clock::now();
   for (std::size_t k = 0; k < final_cover.picks.size(); ++k) {
