@@ -167,34 +167,19 @@ struct SeedCache {
   }
 };
 
-}  // namespace
+// The stages' options, derived once from the decomposition's.
+struct StageOptions {
+  CandidateLineOptions lines;  // step 2
+  GrowOptions grow;            // step 3
+  CoverOptions cover;          // step 4
+  FinishOptions finish;        // step 5
+};
 
-DecomposeResult decompose(const SurfaceIndex& index, const DecomposeOptions& o, const ProgressFn& progress) {
-  auto say = [&](const std::string& s) {
-    if (progress) progress(s);
-  };
-  DecomposeResult out;
-  const double diagonal = index.diagonal();
-  // A noisy Φ (a scan): the solver works on a smoothed copy and reports against Φ as given.
-  auto t_noise = Clock::now();
-  out.noise = estimate_noise(index.mesh());
-  std::unique_ptr<SurfaceIndex> smoothed;
-  if (out.noise.sigma > o.noise_fraction * o.tolerance) {
-    smoothed = std::make_unique<SurfaceIndex>(smooth_surface(index.mesh(), o.smoothing_passes, o.smoothing_rings));
-    out.smoothed = true;
-    say("the surface is noisy (sigma " + std::to_string(out.noise.sigma) + " mm): fitting on a smoothed copy");
-  }
-  const SurfaceIndex& work = smoothed ? *smoothed : index;
-  const Mesh& mesh = work.mesh();
-  out.times.seeds += since(t_noise);
+StageOptions stage_options(const DecomposeOptions& o, const std::vector<CutterKind>& kinds, double diagonal,
+                           const SurfaceIndex* given) {
   const ToolRanges R = tool_ranges(o, diagonal);
-  const Thresholds th = thresholds_for(o.tolerance);
-  const std::vector<CutterKind> kinds = by_generality(o.kinds);
-  const VecX area = vertex_areas(mesh);
-  Cover cover = empty_cover(area);
-  out.total_area = cover.total_area;
-
-  CandidateLineOptions lo;
+  StageOptions s;
+  CandidateLineOptions& lo = s.lines;
   lo.kinds = kinds;
   lo.radius_min = R.radius_min, lo.radius_max = R.radius_max;
   lo.length_min = R.length_min, lo.length_max = R.length_max;
@@ -204,7 +189,7 @@ DecomposeResult decompose(const SurfaceIndex& index, const DecomposeOptions& o, 
   lo.max_travel = 2.0 * diagonal;
   lo.trace = o.trace;
 
-  GrowOptions go;
+  GrowOptions& go = s.grow;
   go.fit.kind = kinds.back();
   go.fit.control_points = o.control_points;
   go.fit.samples_t = o.samples_t;
@@ -224,17 +209,16 @@ DecomposeResult decompose(const SurfaceIndex& index, const DecomposeOptions& o, 
   go.evaluate.holder = o.holder;
   go.evaluate.holder_length = o.holder_length;
   go.evaluate.holder_radius = o.holder_radius;
-  go.thresholds = th;
-  go.given = smoothed ? &index : nullptr;
+  go.thresholds = thresholds_for(o.tolerance);
+  go.given = given;
   go.trace = o.trace;
 
-  CoverOptions co;
-  co.coverage_target = o.coverage_target;
-  co.max_patches = o.max_patches;
-  co.min_gain = o.min_gain;
+  s.cover.coverage_target = o.coverage_target;
+  s.cover.max_patches = o.max_patches;
+  s.cover.min_gain = o.min_gain;
 
   // The chosen patches' finish (step 5): their simplest cutter kind, evaluated on the fine grid.
-  FinishOptions fo;
+  FinishOptions& fo = s.finish;
   fo.grow = go;
   fo.simpler.assign(kinds.begin(), kinds.end() - 1);
   fo.evaluate = go.evaluate;
@@ -244,389 +228,512 @@ DecomposeResult decompose(const SurfaceIndex& index, const DecomposeOptions& o, 
   fo.evaluate.envelope = true;
   fo.evaluate.vertex_side = true;
   fo.evaluate.refine_max = EvaluateOptions{}.refine_max;
+  return s;
+}
 
-  std::vector<Patch> pool;                       // every valid candidate patch, in a deterministic order
-  std::vector<char> finished;                    // per pool entry: replaced by its finished patch
-  GrownCache cache;                              // every candidate grown so far
-  SeedCache seed_cache;                          // every seed searched with part of Φ covered
-  std::vector<Claim> claims;                     // of every pool entry
+// What a round judges its candidates by: the area of the target, and of nearly all of Φ.
+struct RoundBars {
+  int round = 0;             // from 0
+  double target_area = 0.0;  // a patch that covers this covers the target alone
+  // A patch that leaves less than min_round_gain of Φ uncovered (and covers the target): no
+  // other candidate, nor the search of every seed, could add more than that, which is what the
+  // search deems too little for another round. (A lower bar, the target itself, left the
+  // spline part of scripts/coverage_curves.py with 93.5% instead of 96.7%.)
+  double nearly_all = 0.0;
+
+  bool covers_alone(const Grown& g) const {
+    for (const Patch& p : g.patches)
+      if (p.covered_area >= target_area) return true;
+    return false;
+  }
+  bool ends_search(const Grown& g) const {
+    for (const Patch& p : g.patches)
+      if (p.covered_area >= nearly_all) return true;
+    return false;
+  }
+};
+
+// The candidate lines of one round (step 2).
+struct RoundLines {
+  std::vector<LineCandidate> lines;  // best first
+  bool covered_early = false;        // the search ended at a line that covers the target alone
+  std::size_t looked = 0;            // seeds whose lines are in `lines`
+};
+
+// One decomposition's state over its rounds (steps 1-4) and finishes (step 5): the pool of
+// candidate patches, what was grown and searched, and the cover.
+class Decomposition {
+ public:
+  // `work` is Φ or its smoothed copy (then `given` is Φ); lengths scale with Φ's `diagonal`.
+  Decomposition(const SurfaceIndex& work, const SurfaceIndex* given, double diagonal, const DecomposeOptions& o,
+                const std::vector<CutterKind>& kinds, const ProgressFn& say, DecomposeResult& out)
+      : work_(work),
+        mesh_(work.mesh()),
+        o_(o),
+        diagonal_(diagonal),
+        s_(stage_options(o, kinds, diagonal, given)),
+        say_(say),
+        out_(out),
+        area_(vertex_areas(mesh_)),
+        cover_(empty_cover(area_)) {
+    out_.total_area = cover_.total_area;
+  }
+
+  // Rounds from out.rounds on, over what `cover` leaves, until one ends the search. True when
+  // the last ended because its (coarse) cover met the target.
+  bool rounds();
   // Finishes the pool entries `picks` not yet finished, concurrently, each in place: the
   // finished patch, or, where the finish finds no valid patch, one that covers nothing (no
   // cover picks it again; its claim stays, so its line is not grown again).
-  const auto finish_picks = [&](const std::vector<int>& picks) {
-    const auto t = Clock::now();
-    finished.resize(pool.size(), 0);
-    std::vector<std::size_t> todo;
-    for (const int k : picks)
-      if (!finished[static_cast<std::size_t>(k)]) todo.push_back(static_cast<std::size_t>(k));
-    parallel_invoke_each(todo.size(), [&](std::size_t i) {
-      Patch& p = pool[todo[i]];
-      if (std::optional<Patch> f = finish_patch(work, p, fo)) {
-        p = std::move(*f);
-      } else {
-        p.covered_vertices.clear();
-        p.covered_area = 0.0;
-      }
-    });
-    for (const std::size_t k : todo) finished[k] = 1;
-    out.times.finish += since(t);
-  };
+  void finish_picks(const std::vector<int>& picks);
   // The finished picks that still add enough, in the order that covers the most early on.
-  const auto kept_of = [&](const std::vector<int>& picks) {
-    Cover kept = empty_cover(area);
-    kept.used.assign(pool.size(), 1);
-    for (const int k : picks) kept.used[static_cast<std::size_t>(k)] = 0;
-    CoverOptions fco = co;
-    fco.coverage_target = 1.0;  // keep every chosen patch that still adds enough
-    greedy_cover(pool, area, fco, &kept);
-    return order_cover(pool, area, kept.picks);
+  Cover kept_of(const std::vector<int>& picks) const;
+  // A cover of the pool as it is, from nothing.
+  Cover cover_again() const;
+  bool finished(int k) const { return finished_[static_cast<std::size_t>(k)] != 0; }
+
+  const VecX& area() const { return area_; }  // per vertex of Φ
+  const Cover& cover() const { return cover_; }
+  void set_cover(Cover c) { cover_ = std::move(c); }
+  // Moves pool entry k out (the result's patches).
+  Patch take(int k) { return std::move(pool_[static_cast<std::size_t>(k)]); }
+
+ private:
+  std::vector<Seed> seeds(int round);                                             // step 1
+  RoundLines candidate_lines(const RoundBars& bars, const std::vector<Seed>& seeds);  // step 2
+  // Step 2's try of the candidates at the head of `lines` that may cover the target alone.
+  bool grow_alone(const RoundBars& bars, const std::vector<LineCandidate>& lines);
+  void grow(const RoundBars& bars, const std::vector<LineCandidate>& lines);  // step 3
+
+  const SurfaceIndex& work_;  // Φ, or its smoothed copy
+  const Mesh& mesh_;
+  const DecomposeOptions& o_;
+  const double diagonal_;
+  const StageOptions s_;
+  const ProgressFn& say_;
+  DecomposeResult& out_;
+  const VecX area_;
+  Cover cover_;
+
+  std::vector<Patch> pool_;       // every valid candidate patch, in a deterministic order
+  std::vector<char> finished_;    // per pool entry: replaced by its finished patch
+  std::vector<Claim> claims_;     // of every pool entry
+  GrownCache cache_;              // every candidate grown so far
+  GrownCache early_;              // this round's candidates grown before every seed was searched
+  SeedCache seed_cache_;          // every seed searched with part of Φ covered
+};
+
+bool Decomposition::rounds() {
+  const DecomposeOptions& o = o_;
+  for (int round = out_.rounds; round < o.max_rounds; ++round) {
+    const std::size_t picks_before = cover_.picks.size();
+    const double fraction_before = cover_.fraction();
+    const std::vector<Seed> seeds = this->seeds(round);
+    if (seeds.empty()) return false;
+
+    RoundBars bars;
+    bars.round = round;
+    bars.target_area = o.coverage_target * cover_.total_area;
+    bars.nearly_all = std::max(bars.target_area, (1.0 - o.min_round_gain) * cover_.total_area);
+    early_ = {};
+    const RoundLines found = candidate_lines(bars, seeds);
+    const std::vector<LineCandidate>& lines = found.lines;
+    out_.candidates += static_cast<int>(lines.size());
+    if (o.trace)
+      for (const LineCandidate& c : lines) {
+        char line[400];
+        std::snprintf(line, sizeof line,
+                      "round %d seed %d line %.3f,%.3f,%.3f,%.3f,%.3f,%.3f: %s L %.2f, F_l %.2e, profile rms %.2e, "
+                      "swept %.2f (%s / %s), estimate %.4g",
+                      round + 1, c.seed, c.line.a.x(), c.line.a.y(), c.line.a.z(), c.line.b.x(), c.line.b.y(),
+                      c.line.b.z(), std::string(to_string(c.kind)).c_str(), c.line.length(), c.movability.value,
+                      c.movability.profile_rms, c.swept, to_string(c.sweep.stop_backward),
+                      to_string(c.sweep.stop_forward), c.estimate);
+        o.trace(line);
+      }
+    if (found.covered_early)
+      say_("round " + std::to_string(round + 1) + ": " + std::to_string(lines.size()) + " candidate lines from the first " +
+           std::to_string(found.looked) + " of " + std::to_string(seeds.size()) + " seeds, one of which covers the target alone");
+    else
+      say_("round " + std::to_string(round + 1) + ": " + std::to_string(seeds.size()) + " seeds, " +
+           std::to_string(lines.size()) + " candidate lines");
+
+    grow(bars, lines);
+
+    // 4. Cover.
+    const auto t0 = Clock::now();
+    greedy_cover(pool_, area_, s_.cover, &cover_);
+    improve_cover(pool_, area_, o.max_swaps, &cover_);
+    out_.times.cover += since(t0);
+    out_.rounds = round + 1;
+    say_("round " + std::to_string(round + 1) + ": " + std::to_string(cover_.picks.size()) + " patches cover " +
+         std::to_string(100.0 * cover_.fraction()) + "%");
+    if (cover_.fraction() >= o.coverage_target) return true;
+    if (static_cast<int>(cover_.picks.size()) >= o.max_patches) return false;
+    // Nothing new covered: the next round would seed the same uncovered area the same way.
+    if (cover_.picks.size() == picks_before) return false;
+    if (round > 0 && cover_.fraction() - fraction_before < o.min_round_gain) return false;
+  }
+  return false;
+}
+
+// 1. Seeds: over all of Φ first, then over what is still uncovered.
+std::vector<Seed> Decomposition::seeds(int round) {
+  const auto t0 = Clock::now();
+  SeedOptions so;
+  so.spacing = (round == 0 ? 1.0 : 0.5) * o_.seed_spacing * diagonal_;
+  so.max_seeds = o_.max_seeds;
+  if (round > 0) {
+    so.allowed.assign(static_cast<std::size_t>(mesh_.vertex_count()), 0);
+    for (int v = 0; v < mesh_.vertex_count(); ++v) so.allowed[v] = cover_.vertex_patch[v] < 0;
+  }
+  std::vector<Seed> seeds = seed_tiles(mesh_, so);
+  out_.times.seeds += since(t0);
+  out_.seeds += static_cast<int>(seeds.size());
+  return seeds;
+}
+
+// The candidates at the head of the first batch that step 3 would grow and that may cover the
+// target alone, grown one at a time in rank order until one covers it. True when that one also
+// covers nearly all of Φ (RoundBars::nearly_all).
+bool Decomposition::grow_alone(const RoundBars& bars, const std::vector<LineCandidate>& lines) {
+  int taken = 0;
+  for (const LineCandidate& c : lines) {
+    if (taken == o_.batch || taken == o_.grow_per_round) return false;
+    if (already_claimed(work_, c, claims_)) continue;
+    ++taken;
+    if (c.estimate < bars.target_area) return false;
+    const Grown* g = o_.reuse_grown ? cache_.find(c) : nullptr;
+    if (!g) g = early_.find(c);
+    if (!g) {
+      early_.entries.push_back({c.line, c.kind, c.sweep.rulings, grow_patch(work_, c, s_.grow)});
+      g = &early_.entries.back().grown;
+    }
+    if (bars.covers_alone(*g)) return bars.ends_search(*g);
+  }
+  return false;
+}
+
+// 2. Candidate lines, one task per seed, handed out in seed order; per-seed results keep the
+// order deterministic.
+RoundLines Decomposition::candidate_lines(const RoundBars& bars, const std::vector<Seed>& seeds) {
+  const auto t0 = Clock::now();
+  double early_s = 0.0;  // growth before every seed was searched: counted as the fit's
+  const CoveredFaces covered = bars.round == 0 ? CoveredFaces{} : faces_of(mesh_, cover_.vertex_patch);
+  std::vector<std::vector<LineCandidate>> per_seed(seeds.size());
+  std::vector<long long> scored(seeds.size(), 0);
+  // Round 0 sees no cover (and searches without it): only later rounds' searches are kept.
+  const bool keep = o_.reuse_seeds && !covered.empty();
+  std::vector<char> reused(seeds.size(), 0);
+  std::vector<std::vector<FreeRunRecord>> runs(seeds.size());
+  // Searches seed s; false when `stop` ended the search part-way (nothing of it is kept: the
+  // seed is searched again if the search goes on).
+  const auto search = [&](std::size_t s, const std::atomic<bool>* stop) {
+    const std::vector<LineCandidate>* known = keep ? seed_cache_.find(work_, seeds[s], covered) : nullptr;
+    if (known) {
+      reused[s] = 1;
+      per_seed[s] = *known;
+      for (LineCandidate& c : per_seed[s]) c.seed = static_cast<int>(s);
+      rank_candidates(per_seed[s], covered);
+      return true;
+    }
+    SearchStop halt{stop};
+    per_seed[s] = seed_candidates(work_, seeds[s], static_cast<int>(s), covered, s_.lines, s_.grow.thresholds,
+                                  &scored[s], keep ? &runs[s] : nullptr, stop ? &halt : nullptr);
+    if (!halt.stopped) return true;
+    per_seed[s].clear();
+    scored[s] = 0;
+    runs[s].clear();
+    return false;
   };
-  constexpr int kFinishPasses = 4;  // step 5 runs at most this often (below)
+  const auto ranked = [&](std::size_t seed_count) {  // the lines of seeds [0, seed_count), best first
+    std::vector<LineCandidate> lines;
+    for (std::size_t s = 0; s < seed_count; ++s) lines.insert(lines.end(), per_seed[s].begin(), per_seed[s].end());
+    std::stable_sort(lines.begin(), lines.end(),
+                     [](const LineCandidate& x, const LineCandidate& y) { return x.estimate > y.estimate; });
+    return lines;
+  };
+  // A line that may cover nearly all of Φ is tried before the seeds after its own are
+  // searched (DecomposeOptions::grow_early): seeds [0, looked) have been searched and looked
+  // at in order, and the search pauses at the first whose lines include one. Once, in a
+  // round: where that try leaves too much, one patch rarely leaves less (a coarse mesh, a
+  // surface not quite one envelope), and each try costs fits.
+  std::vector<char> searched(seeds.size(), 0);
+  RoundLines out;
+  std::size_t& looked = out.looked;
+  bool may_pause = o_.grow_early, first_alone = false;
+  const auto look = [&] {  // true when it took in a seed with a line that may cover nearly all
+    while (looked < seeds.size() && searched[looked]) {
+      const std::vector<LineCandidate>& ls = per_seed[looked++];
+      if (may_pause &&
+          std::any_of(ls.begin(), ls.end(), [&](const LineCandidate& c) { return c.estimate >= bars.nearly_all; }))
+        return true;
+    }
+    return false;
+  };
+  for (;;) {
+    bool paused = look();  // seeds searched past the last pause
+    if (!paused && !first_alone && !seeds.empty() && may_pause &&
+        cover_.covered_area <= cover_.total_area - bars.nearly_all) {
+      // While Φ is nearly all uncovered (in the first round), the first seed by itself,
+      // with every thread inside its search: on a part one sweep covers, it often has the
+      // line that ends the search, and a second seed searched beside it would be searched
+      // for nothing. Elsewhere this is one seed of some twenty with both threads inside
+      // instead of one thread each, at some cost in efficiency.
+      first_alone = true;
+      search(0, nullptr);
+      searched[0] = 1;
+      paused = look();
+    }
+    // The seeds not yet searched, in seed order: after a pause, those searched beside the
+    // one that paused and stopped part-way come again.
+    std::vector<std::size_t> pending;
+    for (std::size_t s = looked; s < seeds.size(); ++s)
+      if (!searched[s]) pending.push_back(s);
+    if (!paused && !pending.empty()) {
+      std::mutex looked_mutex;
+      std::atomic<bool> pause{false};
+      std::atomic<std::size_t> next{0};
+      parallel_invoke_each(static_cast<std::size_t>(max_threads()), [&](std::size_t) {
+        while (!pause) {
+          const std::size_t i = next++;
+          if (i >= pending.size()) return;
+          const std::size_t s = pending[i];
+          // Once a seed before it pauses the search, a seed still searched is stopped: the
+          // try that follows gets every thread, and whether it ends the search or not, what
+          // the stopped seed would give is the same when searched again.
+          if (!search(s, may_pause ? &pause : nullptr)) continue;
+          const std::lock_guard<std::mutex> lock(looked_mutex);
+          searched[s] = 1;
+          if (!pause && look()) pause = true;
+        }
+      });
+      paused = pause;
+    }
+    if (!paused) {
+      out.lines = ranked(seeds.size());
+      break;
+    }
+    // Seeds [0, looked) hold a line that may cover nearly all of Φ: these seeds' lines are
+    // grown as step 3 would grow them. A patch that leaves less than min_round_gain ends the
+    // search, and these seeds' lines are then the round's candidates.
+    std::vector<LineCandidate> first = ranked(looked);
+    if (o_.trace)
+      o_.trace("round " + std::to_string(bars.round + 1) + " paused after seed " + std::to_string(looked - 1) +
+               " of " + std::to_string(seeds.size()) + ": a line may cover nearly all of the part");
+    const auto t_early = Clock::now();
+    const bool done = grow_alone(bars, first);
+    early_s += since(t_early);
+    may_pause = false;
+    if (done) {
+      out.lines = std::move(first);
+      out.covered_early = true;
+      break;
+    }
+  }
+  for (std::size_t s = 0; s < seeds.size(); ++s) {
+    if (!searched[s]) continue;
+    out_.lines_scored += scored[s];
+    if (reused[s]) ++out_.seeds_reused;
+    else if (keep) seed_cache_.entries.push_back({seeds[s], std::move(runs[s]), per_seed[s]});
+  }
+  out_.times.candidates += since(t0) - early_s;
+  out_.times.fit += early_s;
+  return out;
+}
+
+// 3. Grow the best in batches of o.batch, concurrently within a batch. A candidate over area
+// that a grown patch already covers is skipped: it would grow that patch again.
+void Decomposition::grow(const RoundBars& bars, const std::vector<LineCandidate>& lines) {
+  const DecomposeOptions& o = o_;
+  const auto t0 = Clock::now();
+  const double finish_before = out_.times.finish;  // a patch finished here is counted there
+  int grown_this_round = 0;
+  std::size_t next = 0;
+  double reached = cover_.fraction();  // by the greedy cover of the pool after the last batch
+  while (grown_this_round < o.grow_per_round && next < lines.size()) {
+    std::vector<const LineCandidate*> batch;
+    while (static_cast<int>(batch.size()) < o.batch && grown_this_round + static_cast<int>(batch.size()) < o.grow_per_round &&
+           next < lines.size()) {
+      const LineCandidate& c = lines[next++];
+      if (!already_claimed(work_, c, claims_)) batch.push_back(&c);
+    }
+    if (batch.empty()) break;
+    std::vector<Grown> grown(batch.size());
+    std::vector<const Grown*> known(batch.size());
+    for (std::size_t k = 0; k < batch.size(); ++k) known[k] = o.reuse_grown ? cache_.find(*batch[k]) : nullptr;
+    // The batch is grown in rank order, concurrently, and is kept up to the first candidate
+    // that grows a patch covering the target alone: a part one sweep covers grows one
+    // candidate instead of a batch. Which candidate that is follows from what each grows,
+    // never from which finished first, so the answer is the same at every thread count.
+    // Tasks take candidates in rank order and start none past that one once it is known;
+    // those already running finish and are dropped. Where no patch covers the target alone,
+    // the whole batch is grown: a cover of several patches picks among all of them (the
+    // first candidate with which the pool reached the target, as a stop, left freeform/6
+    // of scripts/coverage_curves.py with 95.4% in 4 patches instead of 98.8% in 5).
+    std::mutex kept_mutex;
+    std::atomic<std::size_t> next_task{0};
+    std::atomic<bool> enough{false};
+    std::vector<char> done(batch.size(), 0);
+    std::size_t kept = 0;  // grown[0, kept) are kept
+    const auto grow_next = [&] {  // the next candidate in rank order
+      const std::size_t k = next_task++;
+      if (enough) return;
+      if (known[k]) grown[k] = *known[k];
+      else if (const Grown* g = early_.find(*batch[k])) grown[k] = *g;
+      else grown[k] = grow_patch(work_, *batch[k], s_.grow);
+      const std::lock_guard<std::mutex> lock(kept_mutex);
+      done[k] = 1;
+      while (!enough && kept < batch.size() && done[kept])
+        if (bars.covers_alone(grown[kept++])) enough = true;
+    };
+    // Candidates whose probe sweep passed over the target's area may cover it alone: in rank
+    // order, each is grown by itself, with both threads inside its fits and evaluations,
+    // until one does or the next could not; the rest of the batch then grows concurrently.
+    // Grown side by side instead, a candidate that covers the part alone took as long as on
+    // one thread, while the next was grown for nothing (the 13k cone part, cone cutters: fit
+    // 45 ms on 1 thread, 50 ms on 2). The same candidates are kept either way. Real faces,
+    // whose best line passes over under half of the part, never grow this way.
+    std::size_t first = 0;
+    for (; first < batch.size() && !enough && batch[first]->estimate >= bars.target_area; ++first) grow_next();
+    parallel_invoke_each(batch.size() - first, [&](std::size_t) { grow_next(); });
+    // The cache after the batch: known[] points into it.
+    for (std::size_t k = 0; k < kept; ++k)
+      if (o.reuse_grown && !known[k])
+        cache_.entries.push_back({batch[k]->line, batch[k]->kind, batch[k]->sweep.rulings, grown[k]});
+    if (o.on_grown) {
+      std::vector<std::size_t> fitted;
+      for (std::size_t k = 0; k < kept; ++k)
+        if (!known[k]) fitted.push_back(k);
+      parallel_invoke_each(fitted.size(), [&](std::size_t i) {
+        o.on_grown(work_, *batch[fitted[i]], s_.grow, grown[fitted[i]]);
+      });
+    }
+    int alone = -1;  // the pool entry that covers the target alone, where one does
+    for (std::size_t k = 0; k < kept; ++k) {
+      Grown& g = grown[k];
+      ++(known[k] ? out_.regrown : out_.grown);
+      ++grown_this_round;
+      for (Patch& p : g.patches) {
+        ++out_.candidates_valid;
+        if (enough && k + 1 == kept && alone < 0 && p.covered_area >= bars.target_area)
+          alone = static_cast<int>(pool_.size());
+        claims_.push_back(claim_of(p, mesh_.vertex_count()));
+        pool_.push_back(std::move(p));
+      }
+    }
+    say_("round " + std::to_string(bars.round + 1) + ": grown " + std::to_string(grown_this_round) + ", " +
+         std::to_string(out_.candidates_valid) + " candidate patches so far");
+    if (enough) {
+      // The coarse grid judged that patch; the finish (step 5) judges it on the fine grid, on
+      // which it may cover less, and with its simplest cutter kind. Finished now, it ends the
+      // round only if it still covers the target alone; otherwise the candidates after it
+      // are grown as if it had not (on a cone face tessellated from IGES, a free-form
+      // cutter ranked first covered 95.7% coarse and 90.7% finished).
+      if (alone < 0) break;
+      finish_picks({alone});
+      if (pool_[static_cast<std::size_t>(alone)].covered_area >= bars.target_area) break;
+      enough = false;
+      if (kept < batch.size()) next = static_cast<std::size_t>(batch[kept] - lines.data());
+    }
+    // Enough in the pool to reach the target: the rest need not be grown.
+    Cover trial = cover_;
+    greedy_cover(pool_, area_, s_.cover, &trial);
+    if (trial.fraction() >= o.coverage_target) break;
+    // A batch that adds less than min_round_gain to the pool's greedy cover ends the
+    // round's growth, as such a round ends the search: the next candidates rank below
+    // those that added nothing worth a patch (on Rotor 67's lower face, the third round's
+    // first batch added nothing, and its second, grown for nothing, took about a quarter
+    // of the round). The round's cover still improves with its swaps (improve_cover).
+    // min_round_gain = 0 grows every batch, as before.
+    if (trial.fraction() - reached < o.min_round_gain) break;
+    reached = trial.fraction();
+  }
+  out_.times.fit += since(t0) - (out_.times.finish - finish_before);
+}
+
+void Decomposition::finish_picks(const std::vector<int>& picks) {
+  const auto t = Clock::now();
+  finished_.resize(pool_.size(), 0);
+  std::vector<std::size_t> todo;
+  for (const int k : picks)
+    if (!finished_[static_cast<std::size_t>(k)]) todo.push_back(static_cast<std::size_t>(k));
+  parallel_invoke_each(todo.size(), [&](std::size_t i) {
+    Patch& p = pool_[todo[i]];
+    if (std::optional<Patch> f = finish_patch(work_, p, s_.finish)) {
+      p = std::move(*f);
+    } else {
+      p.covered_vertices.clear();
+      p.covered_area = 0.0;
+    }
+  });
+  for (const std::size_t k : todo) finished_[k] = 1;
+  out_.times.finish += since(t);
+}
+
+Cover Decomposition::kept_of(const std::vector<int>& picks) const {
+  Cover kept = empty_cover(area_);
+  kept.used.assign(pool_.size(), 1);
+  for (const int k : picks) kept.used[static_cast<std::size_t>(k)] = 0;
+  CoverOptions fco = s_.cover;
+  fco.coverage_target = 1.0;  // keep every chosen patch that still adds enough
+  greedy_cover(pool_, area_, fco, &kept);
+  return order_cover(pool_, area_, kept.picks);
+}
+
+Cover Decomposition::cover_again() const {
+  Cover again = empty_cover(area_);
+  greedy_cover(pool_, area_, s_.cover, &again);
+  improve_cover(pool_, area_, o_.max_swaps, &again);
+  return again;
+}
+
+}  // namespace
+
+DecomposeResult decompose(const SurfaceIndex& index, const DecomposeOptions& o, const ProgressFn& progress) {
+  const ProgressFn say = [&](const std::string& s) {
+    if (progress) progress(s);
+  };
+  DecomposeResult out;
+  // A noisy Φ (a scan): the solver works on a smoothed copy and reports against Φ as given.
+  const auto t_noise = Clock::now();
+  out.noise = estimate_noise(index.mesh());
+  std::unique_ptr<SurfaceIndex> smoothed;
+  if (out.noise.sigma > o.noise_fraction * o.tolerance) {
+    smoothed = std::make_unique<SurfaceIndex>(smooth_surface(index.mesh(), o.smoothing_passes, o.smoothing_rings));
+    out.smoothed = true;
+    say("the surface is noisy (sigma " + std::to_string(out.noise.sigma) + " mm): fitting on a smoothed copy");
+  }
+  const SurfaceIndex& work = smoothed ? *smoothed : index;
+  out.times.seeds += since(t_noise);
+  Decomposition d(work, smoothed ? &index : nullptr, index.diagonal(), o, by_generality(o.kinds), say, out);
+
+  // Rounds (steps 1-4), then the chosen patches with their simplest cutter kind, evaluated
+  // finely and covered again in greedy order (step 5: the fine grid sees a little more or less
+  // than the coarse one). Where the finish lost more than a round must gain (a pick with no
+  // valid patch on the fine grid, or one cut back) and the target is missed, the pool is
+  // covered again with the finished patches as they are. Where that cover promises a round's
+  // gain over the finished one, its new picks are finished; otherwise, where the rounds ended
+  // only because their coarse cover met the target, they go on over what is still uncovered.
+  // A few passes at most; the best cover finished is kept. (A cylinder part tessellated from
+  // IGES: two patches covered 98.1% coarse, and the finish kept one, at 60.8%.)
+  constexpr int kFinishPasses = 4;
   Cover final_cover;
   bool seed_again = true;   // the rounds run in this pass
   bool met_target = false;  // the rounds last run ended as their (coarse) cover met the target
   bool lost = false;        // a finish lost more than a round must gain
   for (int pass = 0;; ++pass) {
-    if (seed_again) met_target = false;
-    for (int round = out.rounds; seed_again && round < o.max_rounds; ++round) {
-      const std::size_t picks_before = cover.picks.size();
-      const double fraction_before = cover.fraction();
-      // 1. Seeds: over all of Φ first, then over what is still uncovered.
-      auto t0 = Clock::now();
-      SeedOptions so;
-      so.spacing = (round == 0 ? 1.0 : 0.5) * o.seed_spacing * diagonal;
-      so.max_seeds = o.max_seeds;
-      if (round > 0) {
-        so.allowed.assign(static_cast<std::size_t>(mesh.vertex_count()), 0);
-        for (int v = 0; v < mesh.vertex_count(); ++v) so.allowed[v] = cover.vertex_patch[v] < 0;
-      }
-      const std::vector<Seed> seeds = seed_tiles(mesh, so);
-      out.times.seeds += since(t0);
-      out.seeds += static_cast<int>(seeds.size());
-      if (seeds.empty()) break;
-
-      const double target_area = o.coverage_target * cover.total_area;
-      const auto covers_alone = [&](const Grown& g) {
-        for (const Patch& p : g.patches)
-          if (p.covered_area >= target_area) return true;
-        return false;
-      };
-      GrownCache early;  // candidates grown before every seed was searched (step 2)
-      // What step 3 does first with `lines`: the candidates at the head of its first batch that
-      // may cover the target alone, grown one at a time in rank order until one covers it. True
-      // when that one also leaves less than min_round_gain of Φ uncovered: no other candidate,
-      // nor the search of every seed, could add more than that, which is what the search deems
-      // too little for another round. (A lower bar, the target itself, left the spline part of
-      // scripts/coverage_curves.py with 93.5% instead of 96.7%.)
-      const double nearly_all = std::max(target_area, (1.0 - o.min_round_gain) * cover.total_area);
-      const auto ends_search = [&](const Grown& g) {
-        for (const Patch& p : g.patches)
-          if (p.covered_area >= nearly_all) return true;
-        return false;
-      };
-      const auto grow_alone = [&](const std::vector<LineCandidate>& lines) {
-        int taken = 0;
-        for (const LineCandidate& c : lines) {
-          if (taken == o.batch || taken == o.grow_per_round) return false;
-          if (already_claimed(work, c, claims)) continue;
-          ++taken;
-          if (c.estimate < target_area) return false;
-          const Grown* g = o.reuse_grown ? cache.find(c) : nullptr;
-          if (!g) g = early.find(c);
-          if (!g) {
-            early.entries.push_back({c.line, c.kind, c.sweep.rulings, grow_patch(work, c, go)});
-            g = &early.entries.back().grown;
-          }
-          if (covers_alone(*g)) return ends_search(*g);
-        }
-        return false;
-      };
-
-      // 2. Candidate lines, one task per seed, handed out in seed order; per-seed results keep
-      // the order deterministic.
-      t0 = Clock::now();
-      double early_s = 0.0;  // growth before every seed was searched: counted as the fit's
-      const CoveredFaces covered = round == 0 ? CoveredFaces{} : faces_of(mesh, cover.vertex_patch);
-      std::vector<std::vector<LineCandidate>> per_seed(seeds.size());
-      std::vector<long long> scored(seeds.size(), 0);
-      // Round 0 sees no cover (and searches without it): only later rounds' searches are kept.
-      const bool keep = o.reuse_seeds && !covered.empty();
-      std::vector<char> reused(seeds.size(), 0);
-      std::vector<std::vector<FreeRunRecord>> runs(seeds.size());
-      // Searches seed s; false when `stop` ended the search part-way (nothing of it is kept: the
-      // seed is searched again if the search goes on).
-      const auto search = [&](std::size_t s, const std::atomic<bool>* stop) {
-        const std::vector<LineCandidate>* known = keep ? seed_cache.find(work, seeds[s], covered) : nullptr;
-        if (known) {
-          reused[s] = 1;
-          per_seed[s] = *known;
-          for (LineCandidate& c : per_seed[s]) c.seed = static_cast<int>(s);
-          rank_candidates(per_seed[s], covered);
-          return true;
-        }
-        SearchStop halt{stop};
-        per_seed[s] = seed_candidates(work, seeds[s], static_cast<int>(s), covered, lo, th, &scored[s],
-                                      keep ? &runs[s] : nullptr, stop ? &halt : nullptr);
-        if (!halt.stopped) return true;
-        per_seed[s].clear();
-        scored[s] = 0;
-        runs[s].clear();
-        return false;
-      };
-      const auto ranked = [&](std::size_t seed_count) {  // the lines of seeds [0, seed_count), best first
-        std::vector<LineCandidate> lines;
-        for (std::size_t s = 0; s < seed_count; ++s) lines.insert(lines.end(), per_seed[s].begin(), per_seed[s].end());
-        std::stable_sort(lines.begin(), lines.end(),
-                         [](const LineCandidate& x, const LineCandidate& y) { return x.estimate > y.estimate; });
-        return lines;
-      };
-      // A line that may cover nearly all of Φ is tried before the seeds after its own are
-      // searched (DecomposeOptions::grow_early): seeds [0, looked) have been searched and looked
-      // at in order, and the search pauses at the first whose lines include one. Once, in a
-      // round: where that try leaves too much, one patch rarely leaves less (a coarse mesh, a
-      // surface not quite one envelope), and each try costs fits.
-      std::vector<char> searched(seeds.size(), 0);
-      std::size_t looked = 0;
-      bool may_pause = o.grow_early, first_alone = false;
-      const auto look = [&] {  // true when it took in a seed with a line that may cover nearly all
-        while (looked < seeds.size() && searched[looked]) {
-          const std::vector<LineCandidate>& ls = per_seed[looked++];
-          if (may_pause && std::any_of(ls.begin(), ls.end(), [&](const LineCandidate& c) { return c.estimate >= nearly_all; }))
-            return true;
-        }
-        return false;
-      };
-      std::vector<LineCandidate> lines;
-      bool covered_early = false;
-      for (;;) {
-        bool paused = look();  // seeds searched past the last pause
-        if (!paused && !first_alone && !seeds.empty() && may_pause && cover.covered_area <= cover.total_area - nearly_all) {
-          // While Φ is nearly all uncovered (in the first round), the first seed by itself,
-          // with every thread inside its search: on a part one sweep covers, it often has the
-          // line that ends the search, and a second seed searched beside it would be searched
-          // for nothing. Elsewhere this is one seed of some twenty with both threads inside
-          // instead of one thread each, at some cost in efficiency.
-          first_alone = true;
-          search(0, nullptr);
-          searched[0] = 1;
-          paused = look();
-        }
-        // The seeds not yet searched, in seed order: after a pause, those searched beside the
-        // one that paused and stopped part-way come again.
-        std::vector<std::size_t> pending;
-        for (std::size_t s = looked; s < seeds.size(); ++s)
-          if (!searched[s]) pending.push_back(s);
-        if (!paused && !pending.empty()) {
-          std::mutex looked_mutex;
-          std::atomic<bool> pause{false};
-          std::atomic<std::size_t> next{0};
-          parallel_invoke_each(static_cast<std::size_t>(max_threads()), [&](std::size_t) {
-            while (!pause) {
-              const std::size_t i = next++;
-              if (i >= pending.size()) return;
-              const std::size_t s = pending[i];
-              // Once a seed before it pauses the search, a seed still searched is stopped: the
-              // try that follows gets every thread, and whether it ends the search or not, what
-              // the stopped seed would give is the same when searched again.
-              if (!search(s, may_pause ? &pause : nullptr)) continue;
-              const std::lock_guard<std::mutex> lock(looked_mutex);
-              searched[s] = 1;
-              if (!pause && look()) pause = true;
-            }
-          });
-          paused = pause;
-        }
-        if (!paused) {
-          lines = ranked(seeds.size());
-          break;
-        }
-        // Seeds [0, looked) hold a line that may cover nearly all of Φ: these seeds' lines are
-        // grown as step 3 would grow them. A patch that leaves less than min_round_gain ends the
-        // search, and these seeds' lines are then the round's candidates.
-        std::vector<LineCandidate> first = ranked(looked);
-        if (o.trace)
-          o.trace("round " + std::to_string(round + 1) + " paused after seed " + std::to_string(looked - 1) + " of " +
-                  std::to_string(seeds.size()) + ": a line may cover nearly all of the part");
-        const auto t_early = Clock::now();
-        const bool done = grow_alone(first);
-        early_s += since(t_early);
-        may_pause = false;
-        if (done) {
-          lines = std::move(first);
-          covered_early = true;
-          break;
-        }
-      }
-      for (std::size_t s = 0; s < seeds.size(); ++s) {
-        if (!searched[s]) continue;
-        out.lines_scored += scored[s];
-        if (reused[s]) ++out.seeds_reused;
-        else if (keep) seed_cache.entries.push_back({seeds[s], std::move(runs[s]), per_seed[s]});
-      }
-      out.candidates += static_cast<int>(lines.size());
-      if (o.trace)
-        for (const LineCandidate& c : lines) {
-          char line[400];
-          std::snprintf(line, sizeof line,
-                        "round %d seed %d line %.3f,%.3f,%.3f,%.3f,%.3f,%.3f: %s L %.2f, F_l %.2e, profile rms %.2e, "
-                        "swept %.2f (%s / %s), estimate %.4g",
-                        round + 1, c.seed, c.line.a.x(), c.line.a.y(), c.line.a.z(), c.line.b.x(), c.line.b.y(),
-                        c.line.b.z(), std::string(to_string(c.kind)).c_str(), c.line.length(), c.movability.value,
-                        c.movability.profile_rms, c.swept, to_string(c.sweep.stop_backward),
-                        to_string(c.sweep.stop_forward), c.estimate);
-          o.trace(line);
-        }
-      out.times.candidates += since(t0) - early_s;
-      out.times.fit += early_s;
-      if (covered_early)
-        say("round " + std::to_string(round + 1) + ": " + std::to_string(lines.size()) + " candidate lines from the first " +
-            std::to_string(looked) + " of " + std::to_string(seeds.size()) + " seeds, one of which covers the target alone");
-      else
-        say("round " + std::to_string(round + 1) + ": " + std::to_string(seeds.size()) + " seeds, " +
-            std::to_string(lines.size()) + " candidate lines");
-
-      // 3. Grow the best in batches of o.batch, concurrently within a batch. A candidate over
-      // area that a grown patch already covers is skipped: it would grow that patch again.
-      t0 = Clock::now();
-      const double finish_before = out.times.finish;  // a patch finished here is counted there
-      int grown_this_round = 0;
-      std::size_t next = 0;
-      double reached = cover.fraction();  // by the greedy cover of the pool after the last batch
-      while (grown_this_round < o.grow_per_round && next < lines.size()) {
-        std::vector<const LineCandidate*> batch;
-        while (static_cast<int>(batch.size()) < o.batch && grown_this_round + static_cast<int>(batch.size()) < o.grow_per_round &&
-               next < lines.size()) {
-          const LineCandidate& c = lines[next++];
-          if (!already_claimed(work, c, claims)) batch.push_back(&c);
-        }
-        if (batch.empty()) break;
-        std::vector<Grown> grown(batch.size());
-        std::vector<const Grown*> known(batch.size());
-        for (std::size_t k = 0; k < batch.size(); ++k) known[k] = o.reuse_grown ? cache.find(*batch[k]) : nullptr;
-        // The batch is grown in rank order, concurrently, and is kept up to the first candidate
-        // that grows a patch covering the target alone: a part one sweep covers grows one
-        // candidate instead of a batch. Which candidate that is follows from what each grows,
-        // never from which finished first, so the answer is the same at every thread count.
-        // Tasks take candidates in rank order and start none past that one once it is known;
-        // those already running finish and are dropped. Where no patch covers the target alone,
-        // the whole batch is grown: a cover of several patches picks among all of them (the
-        // first candidate with which the pool reached the target, as a stop, left freeform/6
-        // of scripts/coverage_curves.py with 95.4% in 4 patches instead of 98.8% in 5).
-        std::mutex kept_mutex;
-        std::atomic<std::size_t> next_task{0};
-        std::atomic<bool> enough{false};
-        std::vector<char> done(batch.size(), 0);
-        std::size_t kept = 0;  // grown[0, kept) are kept
-        const auto grow_next = [&] {  // the next candidate in rank order
-          const std::size_t k = next_task++;
-          if (enough) return;
-          if (known[k]) grown[k] = *known[k];
-          else if (const Grown* g = early.find(*batch[k])) grown[k] = *g;
-          else grown[k] = grow_patch(work, *batch[k], go);
-          const std::lock_guard<std::mutex> lock(kept_mutex);
-          done[k] = 1;
-          while (!enough && kept < batch.size() && done[kept])
-            if (covers_alone(grown[kept++])) enough = true;
-        };
-        // Candidates whose probe sweep passed over the target's area may cover it alone: in rank
-        // order, each is grown by itself, with both threads inside its fits and evaluations,
-        // until one does or the next could not; the rest of the batch then grows concurrently.
-        // Grown side by side instead, a candidate that covers the part alone took as long as on
-        // one thread, while the next was grown for nothing (the 13k cone part, cone cutters: fit
-        // 45 ms on 1 thread, 50 ms on 2). The same candidates are kept either way. Real faces,
-        // whose best line passes over under half of the part, never grow this way.
-        std::size_t first = 0;
-        for (; first < batch.size() && !enough && batch[first]->estimate >= target_area; ++first) grow_next();
-        parallel_invoke_each(batch.size() - first, [&](std::size_t) { grow_next(); });
-        // The cache after the batch: known[] points into it.
-        for (std::size_t k = 0; k < kept; ++k)
-          if (o.reuse_grown && !known[k])
-            cache.entries.push_back({batch[k]->line, batch[k]->kind, batch[k]->sweep.rulings, grown[k]});
-        if (o.on_grown) {
-          std::vector<std::size_t> fitted;
-          for (std::size_t k = 0; k < kept; ++k)
-            if (!known[k]) fitted.push_back(k);
-          parallel_invoke_each(fitted.size(), [&](std::size_t i) {
-            o.on_grown(work, *batch[fitted[i]], go, grown[fitted[i]]);
-          });
-        }
-        int alone = -1;  // the pool entry that covers the target alone, where one does
-        for (std::size_t k = 0; k < kept; ++k) {
-          Grown& g = grown[k];
-          ++(known[k] ? out.regrown : out.grown);
-          ++grown_this_round;
-          for (Patch& p : g.patches) {
-            ++out.candidates_valid;
-            if (enough && k + 1 == kept && alone < 0 && p.covered_area >= target_area) alone = static_cast<int>(pool.size());
-            claims.push_back(claim_of(p, mesh.vertex_count()));
-            pool.push_back(std::move(p));
-          }
-        }
-        say("round " + std::to_string(round + 1) + ": grown " + std::to_string(grown_this_round) + ", " +
-            std::to_string(out.candidates_valid) + " candidate patches so far");
-        if (enough) {
-          // The coarse grid judged that patch; the finish (step 5) judges it on the fine grid, on
-          // which it may cover less, and with its simplest cutter kind. Finished now, it ends the
-          // round only if it still covers the target alone; otherwise the candidates after it
-          // are grown as if it had not (on a cone face tessellated from IGES, a free-form
-          // cutter ranked first covered 95.7% coarse and 90.7% finished).
-          if (alone < 0) break;
-          finish_picks({alone});
-          if (pool[static_cast<std::size_t>(alone)].covered_area >= target_area) break;
-          enough = false;
-          if (kept < batch.size()) next = static_cast<std::size_t>(batch[kept] - lines.data());
-        }
-        // Enough in the pool to reach the target: the rest need not be grown.
-        Cover trial = cover;
-        greedy_cover(pool, area, co, &trial);
-        if (trial.fraction() >= o.coverage_target) break;
-        // A batch that adds less than min_round_gain to the pool's greedy cover ends the
-        // round's growth, as such a round ends the search: the next candidates rank below
-        // those that added nothing worth a patch (on Rotor 67's lower face, the third round's
-        // first batch added nothing, and its second, grown for nothing, took about a quarter
-        // of the round). The round's cover still improves with its swaps (improve_cover).
-        // min_round_gain = 0 grows every batch, as before.
-        if (trial.fraction() - reached < o.min_round_gain) break;
-        reached = trial.fraction();
-      }
-      out.times.fit += since(t0) - (out.times.finish - finish_before);
-
-      // 4. Cover.
-      t0 = Clock::now();
-      greedy_cover(pool, area, co, &cover);
-      improve_cover(pool, area, o.max_swaps, &cover);
-      out.times.cover += since(t0);
-      out.rounds = round + 1;
-      say("round " + std::to_string(round + 1) + ": " + std::to_string(cover.picks.size()) + " patches cover " +
-          std::to_string(100.0 * cover.fraction()) + "%");
-      met_target = cover.fraction() >= o.coverage_target;
-      if (met_target || static_cast<int>(cover.picks.size()) >= o.max_patches) break;
-      // Nothing new covered: the next round would seed the same uncovered area the same way.
-      if (cover.picks.size() == picks_before) break;
-      if (round > 0 && cover.fraction() - fraction_before < o.min_round_gain) break;
-    }
-
-    // 5. The chosen patches with their simplest cutter kind, evaluated finely and covered again
-    // in greedy order (the fine grid sees a little more or less than the coarse one).
-    finish_picks(cover.picks);
-    auto t0 = Clock::now();
-    Cover kept = kept_of(cover.picks);
-    lost = lost || kept.fraction() < cover.fraction() - o.min_round_gain;
+    if (seed_again) met_target = d.rounds();
+    d.finish_picks(d.cover().picks);
+    const auto t0 = Clock::now();
+    Cover kept = d.kept_of(d.cover().picks);
+    lost = lost || kept.fraction() < d.cover().fraction() - o.min_round_gain;
     if (pass == 0 || kept.fraction() > final_cover.fraction()) final_cover = std::move(kept);
     out.times.finish += since(t0);
-    // Where the finish lost more than a round must gain (a pick with no valid patch on the fine
-    // grid, or one cut back) and the target is missed, the pool is covered again with the
-    // finished patches as they are. Where that cover promises a round's gain over the finished
-    // one, its new picks are finished; otherwise, where the rounds ended only because their
-    // coarse cover met the target, they go on over what is still uncovered. A few passes at
-    // most; the best cover finished is kept. (A cylinder part tessellated from IGES: two
-    // patches covered 98.1% coarse, and the finish kept one, at 60.8%.)
     if (final_cover.fraction() >= o.coverage_target || !lost || pass + 1 == kFinishPasses) break;
-    Cover again = empty_cover(area);
-    greedy_cover(pool, area, co, &again);
-    improve_cover(pool, area, o.max_swaps, &again);
-    const bool unfinished = std::any_of(again.picks.begin(), again.picks.end(),
-                                        [&](int k) { return finished[static_cast<std::size_t>(k)] == 0; });
+    Cover again = d.cover_again();
+    const bool unfinished =
+        std::any_of(again.picks.begin(), again.picks.end(), [&](int k) { return !d.finished(k); });
     if (unfinished && again.fraction() >= final_cover.fraction() + o.min_round_gain)
       seed_again = false;
     else if (met_target && out.rounds < o.max_rounds)
@@ -634,14 +741,14 @@ DecomposeResult decompose(const SurfaceIndex& index, const DecomposeOptions& o, 
     else
       break;
     say("the finish covered " + std::to_string(100.0 * final_cover.fraction()) + "% of the " +
-        std::to_string(100.0 * cover.fraction()) + "% chosen: " +
+        std::to_string(100.0 * d.cover().fraction()) + "% chosen: " +
         (seed_again ? "the rounds go on" : "covered again with the finished patches"));
     // The rounds go on from the best finished cover, every pick of it finished.
-    cover = seed_again ? final_cover : std::move(again);
+    d.set_cover(seed_again ? final_cover : std::move(again));
   }
   const auto t0 = Clock::now();
   for (std::size_t k = 0; k < final_cover.picks.size(); ++k) {
-    Patch p = std::move(pool[static_cast<std::size_t>(final_cover.picks[k])]);
+    Patch p = d.take(final_cover.picks[k]);
     p.id = static_cast<int>(k);
     out.patches.push_back(std::move(p));
   }
@@ -650,8 +757,8 @@ DecomposeResult decompose(const SurfaceIndex& index, const DecomposeOptions& o, 
   out.covered_area = final_cover.covered_area;
   out.coverage = final_cover.fraction();
   out.coverage_curve = final_cover.curve;
-  out.uncovered = uncovered_regions(mesh, out.vertex_patch, area);
-  say(std::to_string(out.patches.size()) + " patches finished: " + std::to_string(100.0 * out.coverage) + "% covered");
+  out.uncovered = uncovered_regions(work.mesh(), out.vertex_patch, d.area());
+  say(std::to_string(out.patches.size()) + " patches finished: " + std::to_string(100.0 * out.coverage) + "%");
   return out;
 }
 
