@@ -241,15 +241,12 @@ struct RoundBars {
   // spline part of scripts/coverage_curves.py with 93.5% instead of 96.7%.)
   double nearly_all = 0.0;
 
-  bool covers_alone(const Grown& g) const {
-    for (const Patch& p : g.patches)
-      if (p.covered_area >= target_area) return true;
-    return false;
-  }
-  bool ends_search(const Grown& g) const {
-    for (const Patch& p : g.patches)
-      if (p.covered_area >= nearly_all) return true;
-    return false;
+  bool covers_alone(const Grown& g) const { return covers(g, target_area); }
+  bool ends_search(const Grown& g) const { return covers(g, nearly_all); }
+
+ private:
+  static bool covers(const Grown& g, double area) {
+    return std::any_of(g.patches.begin(), g.patches.end(), [&](const Patch& p) { return p.covered_area >= area; });
   }
 };
 
