@@ -348,23 +348,32 @@ def scoring_rows(lad):
     return rows
 
 
-def paired(t1s, t2s, formula):
-    """Median over the repetitions both have of formula(t1_i, t2_i), and how many; (None, 0)
-    with fewer than two. The machine's speed drifts by tens of percent over a run; the 1- and
-    2-thread runs of one repetition ran back to back, so their ratio does not see the drift
-    that a ratio of medians taken minutes apart does."""
+def pair_values(t1s, t2s, formula):
+    """formula(t1_i, t2_i) for every repetition i both have, in order; [] with fewer than two.
+    The machine's speed drifts by tens of percent over a run; the 1- and 2-thread runs of one
+    repetition ran back to back, so their ratio does not see the drift that a ratio of medians
+    taken minutes apart does."""
     common = sorted(set(t1s) & set(t2s))
     values = [formula(t1s[i], t2s[i]) for i in common]
     if len(values) < 2 or any(v is None for v in values):
-        return None, 0
-    return statistics.median(values), len(values)
+        return []
+    return values
+
+
+def paired(t1s, t2s, formula):
+    """Median over the repetitions both have of formula(t1_i, t2_i), and how many; (None, 0)
+    with fewer than two (pair_values)."""
+    values = pair_values(t1s, t2s, formula)
+    return (statistics.median(values), len(values)) if values else (None, 0)
 
 
 def parallel_rows(benches):
     """Speed-up and efficiency for every key with threads:1 and threads:2 runs: the median of
     the per-repetition ratios where both have two or more repetitions, else the ratio of the
-    medians ("pairs" 0); "ceiling" is what one fork and join's cost (fork_join_cost) leaves
-    a stage of that length at best, None without BM_ForkJoin in the run."""
+    medians ("pairs" 0); "low" and "high" are the lowest and highest efficiency of one pair
+    (None without pairs): the machine's noise on that row; "ceiling" is what one fork and
+    join's cost (fork_join_cost) leaves a stage of that length at best, None without
+    BM_ForkJoin in the run."""
     rows = []
     cost = fork_join_cost(benches)
     for key in ordered_keys(benches):
@@ -382,8 +391,23 @@ def parallel_rows(benches):
             value, pairs = paired(b1.reals, b2.reals, formula)
             row[name] = value if pairs else formula(b1.real_s, b2.real_s)
             row["pairs"] = pairs
+        values = pair_values(b1.reals, b2.reals, parallel_efficiency)
+        row["low"], row["high"] = (min(values), max(values)) if values else (None, None)
         rows.append(row)
     return rows
+
+
+def below_in_every_pair(rows, target=0.9):
+    """The parallel_rows whose every pair's efficiency is under target (their "high"; rows
+    without pairs are left out: one ratio of medians cannot tell a miss from the noise), as
+    two lists of benchmark names: those whose ceiling is under target too (too short for the
+    machine's fork and join), and the rest (ceiling unknown or at least target)."""
+    short, slow = [], []
+    for r in rows:
+        if r["high"] is None or r["high"] >= target or r["benchmark"].startswith("BM_ForkJoin/"):
+            continue
+        (short if r["ceiling"] is not None and r["ceiling"] < target else slow).append(r["benchmark"])
+    return short, slow
 
 
 def fit_rows(lad):
@@ -784,11 +808,21 @@ def build_markdown(title, run_path, context, benches, base_path, base, lad):
                 f"t1 ≥ {human_time(18 * cost)}. The ceiling column is that bound for each row; "
                 f"where the efficiency is under 0.9 and so is the ceiling, the stage is too short "
                 f"for this machine's thread wake-ups, whatever its code.", ""]
+    rows = parallel_rows(benches)
     out.append(md_table(
-        ["benchmark", "t (1 thread)", "t (2 threads)", "speed-up", "efficiency", "ceiling", "pairs"],
+        ["benchmark", "t (1 thread)", "t (2 threads)", "speed-up", "efficiency", "pairs' range",
+         "ceiling", "pairs"],
         [[f"`{r['benchmark']}`", human_time(r["t1_s"]), human_time(r["t2_s"]),
-          sig3(r["speedup"]), sig3(r["efficiency"]), sig3(r["ceiling"]), str(r["pairs"] or "medians")]
-         for r in parallel_rows(benches)]))
+          sig3(r["speedup"]), sig3(r["efficiency"]),
+          "n/a" if r["low"] is None else f"{sig3(r['low'])}–{sig3(r['high'])}",
+          sig3(r["ceiling"]), str(r["pairs"] or "medians")]
+         for r in rows]))
+    short, slow = below_in_every_pair(rows)
+    out += ["", "Under 0.9 in every pair (the pairs' range is the machine's noise on a row: a "
+            "median under 0.9 whose best pair reaches it is not yet a miss):", ""]
+    out += [f"- too short for this machine (ceiling under 0.9 too): "
+            f"{', '.join(f'`{b}`' for b in short) or 'none'}",
+            f"- long enough to reach it: {', '.join(f'`{b}`' for b in slow) or 'none'}"]
 
     out += ["", "### Fit time vs unavoidable query time", "",
             "unavoidable = gn_iterations × samples ÷ raw cold queries/s (same part, size and "

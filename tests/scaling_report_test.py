@@ -178,11 +178,28 @@ class ScalingReportTest(unittest.TestCase):
         self.assertEqual(row["pairs"], 3)
         self.assertAlmostEqual(row["speedup"], 1.0 / 0.55)
         self.assertAlmostEqual(row["efficiency"], 1.0 / 1.1)
+        # The pairs' range: 1 / 1.1 twice, 1.3 / 1.0 once.
+        self.assertAlmostEqual(row["low"], 1.0 / 1.1)
+        self.assertAlmostEqual(row["high"], 1.3)
         # Aggregates alone (no repetitions to pair): the ratio of the medians.
         _, benches = sr.load_run(self.write("agg.json", gb_json(ladder_run(sizes=(4,)))))
         par = {r["benchmark"]: r for r in sr.parallel_rows(benches)}
         self.assertEqual(par["Ladder/index/cone/tri_k:4"]["pairs"], 0)
         self.assertAlmostEqual(par["Ladder/index/cone/tri_k:4"]["efficiency"], 1 / (2 * 0.55))
+
+    def test_a_row_misses_only_when_every_pair_does(self):
+        def row(name, low, high, ceiling):
+            return {"benchmark": name, "low": low, "high": high, "ceiling": ceiling}
+        rows = [row("Ladder/index/cone/tri_k:1", 0.53, 0.63, 0.55),    # too short to reach it
+                row("Ladder/command/cone/tri_k:16", 0.67, 0.75, 0.99),  # a miss for its length
+                row("Ladder/decompose/cone/tri_k:16", 0.81, 0.91, 0.99),  # one pair reaches it
+                row("Ladder/index/blade/tri_k:8", 0.85, 0.88, None),    # no BM_ForkJoin: unknown
+                row("Ladder/fit/cone/tri_k:1", None, None, 0.99),       # no pairs: not judged
+                row("BM_ForkJoin/work_us:100/idle_us:1000", 0.5, 0.56, 0.52)]  # the yardstick
+        short, slow = sr.below_in_every_pair(rows)
+        self.assertEqual(short, ["Ladder/index/cone/tri_k:1"])
+        self.assertEqual(slow, ["Ladder/command/cone/tri_k:16", "Ladder/index/blade/tri_k:8"])
+        self.assertEqual(sr.below_in_every_pair(rows, target=0.5), ([], []))
 
     def test_fork_join_sets_each_stage_a_ceiling(self):
         # One fork and join cost 90 µs over one task at every task length (0.1-2 ms); the 1k
@@ -207,6 +224,9 @@ class ScalingReportTest(unittest.TestCase):
         md = sr.build_markdown("t", "run.json", {}, benches, None, None, sr.ladder(benches))
         self.assertIn("costs 90.0 µs on this machine", md)
         self.assertIn("0.9 needs t1 ≥ 1.62 ms", md)
+        # Aggregates alone have no pairs: no range, and no row is called a miss.
+        self.assertIn("| n/a | 0.526 | medians |", md)
+        self.assertIn("- too short for this machine (ceiling under 0.9 too): none", md)
         # Without the benchmark in the run: no ceiling, and the table says so.
         del benches["BM_ForkJoin/work_us:100/idle_us:1000/threads:2"]
         del benches["BM_ForkJoin/work_us:500/idle_us:1000/threads:2"]
