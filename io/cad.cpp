@@ -15,12 +15,14 @@
 #include <chrono>
 #include <cmath>
 #include <csignal>
+#include <cctype>
 #include <cstdio>
 #include <cstdlib>
 #include <functional>
 #include <mutex>
 #include <system_error>
 #include <thread>
+#include <string_view>
 #include <unordered_map>
 
 #include "io/cad_module.h"
@@ -38,16 +40,32 @@ namespace fs = std::filesystem;
   throw Error(name + ": " + problem);
 }
 
-// The module is opened once per process and never closed: the shapes and surfaces it made
-// are freed by its own code whenever the last holder lets go, up to the process's exit.
-// Where it is looked for, in order: $FLANK_CAD_MODULE; beside the running program (the flank
-// binary and libflank_cad.so are built into one folder, and may be copied together); the
-// path it was built at (the tests', benchmarks' and fuzzers' binaries live elsewhere).
+// The two builds of the module (io/CMakeLists.txt): STEP's, which every decompose and fit
+// opens, and IGES's, the same code with IGES's translator too, opened for IGES files only.
+// Both are built from one source and run on the same Open CASCADE libraries, so a surface one
+// made can be written by the other (a surface fitted for patches.step, written as IGES).
+struct ModuleBuild {
+  const char* file;      // beside the running program
+  const char* built_at;  // where the build put it
+  const char* env;       // the variable that names it instead
+  const char* needs;     // for the message when it does not open
+};
+constexpr ModuleBuild kStepModule{"libflank_cad.so", FLANK_CAD_MODULE_PATH, "FLANK_CAD_MODULE",
+                                  "STEP files need flank's CAD module"};
+constexpr ModuleBuild kIgesModule{"libflank_cad_iges.so", FLANK_CAD_IGES_MODULE_PATH, "FLANK_CAD_IGES_MODULE",
+                                  "IGES files need flank's IGES module"};
+
+// A module is opened once per process and never closed: the shapes and surfaces it made are
+// freed by its own code whenever the last holder lets go, up to the process's exit. Where it
+// is looked for, in order: its variable ($FLANK_CAD_MODULE, $FLANK_CAD_IGES_MODULE); beside
+// the running program (the flank binary and the modules are built into one folder, and may be
+// copied together); the path it was built at (the tests', benchmarks' and fuzzers' binaries
+// live elsewhere).
 class Module {
  public:
-  static Module& instance() {
-    static Module module;
-    return module;
+  static Module& instance(bool iges) {
+    static Module step_module(kStepModule), iges_module(kIgesModule);
+    return iges ? iges_module : step_module;
   }
   // Starts opening the module on a thread of its own, once, unless it is open; the thread is
   // joined by the first get() or by settle().
@@ -70,6 +88,7 @@ class Module {
     ready_.store(api_, std::memory_order_release);
     return *api_;
   }
+  bool ready() const { return ready_.load(std::memory_order_acquire) != nullptr; }
   void settle() {
     const std::lock_guard lock(mutex_);
     if (thread_.joinable()) thread_.join();
@@ -82,17 +101,17 @@ class Module {
   }
 
  private:
-  Module() = default;
+  explicit Module(const ModuleBuild& build) : build_(build) {}
   void open() {
     std::call_once(once_, [this] {
       std::vector<std::string> paths;
-      if (const char* env = std::getenv("FLANK_CAD_MODULE"); env && *env) {
+      if (const char* env = std::getenv(build_.env); env && *env) {
         paths.emplace_back(env);
       } else {
         std::error_code ec;
         const fs::path self = fs::read_symlink("/proc/self/exe", ec);
-        if (!ec) paths.push_back((self.parent_path() / "libflank_cad.so").string());
-        if (paths.empty() || paths.front() != FLANK_CAD_MODULE_PATH) paths.emplace_back(FLANK_CAD_MODULE_PATH);
+        if (!ec) paths.push_back((self.parent_path() / build_.file).string());
+        if (paths.empty() || paths.front() != build_.built_at) paths.emplace_back(build_.built_at);
       }
       std::string tried;
       for (const std::string& path : paths) {
@@ -114,11 +133,11 @@ class Module {
         break;
       }
       if (!api_)
-        error_ = "STEP and IGES files need flank's CAD module (libflank_cad.so, Open CASCADE), which did not open: " +
-                 tried;
+        error_ = std::string(build_.needs) + " (" + build_.file + ", Open CASCADE), which did not open: " + tried;
     });
   }
 
+  const ModuleBuild& build_;
   std::mutex mutex_;
   std::thread thread_;
   std::once_flag once_;
@@ -128,12 +147,36 @@ class Module {
   std::atomic<const cad_module::Api*> ready_{nullptr};
 };
 
-const cad_module::Api& module(const std::string& name) { return Module::instance().get(name); }
+// Whether `name` ends in .igs or .iges, in any case (no allocation: the surfaces' points ask
+// for their module at every call).
+bool iges_name(std::string_view name) {
+  const auto ends_with = [&](std::string_view ext) {
+    return name.size() >= ext.size() &&
+           std::equal(ext.begin(), ext.end(), name.end() - static_cast<std::ptrdiff_t>(ext.size()),
+                      [](char e, char c) { return e == std::tolower(static_cast<unsigned char>(c)); });
+  };
+  return ends_with(".igs") || ends_with(".iges");
+}
+
+// The module for the file `name`: IGES's for an IGES file, else STEP's (also for the names of
+// surfaces, which are not files). Open CASCADE's set-up is not thread-safe, and each module sets
+// it up as it opens (the translators' controllers, a STEP writer's session): IGES's is opened
+// only once STEP's, if it is opening beside, is done. (A decompose of an IGES part opened both
+// at once and wrote a patches.step OCCT could not write, in about one run in three.)
+const cad_module::Api& module(const std::string& name) {
+  if (!iges_name(name)) return Module::instance(false).get(name);
+  Module& iges = Module::instance(true);
+  if (!iges.ready()) Module::instance(false).settle();
+  return iges.get(name);
+}
 
 }  // namespace
 
-void preload_cad_module() { Module::instance().preload(); }
-void settle_cad_module() { Module::instance().settle(); }
+// Not once IGES's module is open: the command may be using Open CASCADE already (module()).
+void preload_cad_module() {
+  if (!Module::instance(true).ready()) Module::instance(false).preload();
+}
+void settle_cad_module() { Module::instance(false).settle(); }  // IGES's is never preloaded
 void require_cad_module(const std::string& name) { module(name); }
 
 bool is_cad_path(const std::string& path) {

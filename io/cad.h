@@ -36,16 +36,18 @@ struct CadTessellation {
 };
 
 // Open CASCADE is loaded (the CAD module, io/cad_module.h) when a STEP or IGES file is first
-// read or written. A command that will write one calls this first: the module is then opened
-// on a thread of its own while the command works (OCCT's libraries took 50–80 ms to load on
-// the 2-core machines here; about 40% less since the module no longer uses XCAF).
+// read or written: STEP's module for STEP files, IGES's (STEP's code with IGES's translator)
+// for IGES files. A command that will write a STEP file calls this first: STEP's module is
+// then opened on a thread of its own while the command works (OCCT's libraries took 50–80 ms
+// to load on the 2-core machines here; about 40% less since the module no longer uses XCAF,
+// and a further 25% since IGES's translator has a module of its own).
 void preload_cad_module();
 // Waits for a preload still opening the module; returns at once when none is. A program that
 // preloads calls this before it exits: the opening thread runs Open CASCADE's static
 // initialisers and the module's warm-up, and exit's destructors must not run under them.
 void settle_cad_module();
-// Waits for the module if it is being opened, opens it if not; throws io::Error("NAME: why")
-// when it cannot be opened.
+// Waits for the module of the file NAME (by its extension) if it is being opened, opens it if
+// not; throws io::Error("NAME: why") when it cannot be opened.
 void require_cad_module(const std::string& name);
 
 // A B-rep part: the faces of a STEP or IGES file.

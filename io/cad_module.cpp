@@ -1,8 +1,14 @@
-// The CAD module (libflank_cad.so): all of flank's Open CASCADE code, opened by io/cad.cpp
-// through the table of io/cad_module.h. Every OCCT exception becomes io::Error with the file's
-// name; OCCT's own console messages are switched off, so a bad file gives one line and nothing else.
+// The CAD module: all of flank's Open CASCADE code, opened by io/cad.cpp through the table of
+// io/cad_module.h. Built twice (io/CMakeLists.txt): libflank_cad.so for STEP, and
+// libflank_cad_iges.so (FLANK_CAD_IGES) for STEP and IGES, as IGES's translator costs every
+// opening a third more; io/cad.cpp opens the second for IGES files only. Every OCCT exception
+// becomes io::Error with the file's name; OCCT's own console messages are switched off, so a
+// bad file gives one line and nothing else.
 #include "io/cad_module.h"
 
+#ifndef FLANK_CAD_IGES
+#define FLANK_CAD_IGES 0  // the STEP build
+#endif
 
 #include <BRepAdaptor_Surface.hxx>
 #include <BRepBndLib.hxx>
@@ -23,11 +29,13 @@
 #include <GeomAPI_PointsToBSplineSurface.hxx>
 #include <Geom_BSplineSurface.hxx>
 #include <Geom_Surface.hxx>
+#if FLANK_CAD_IGES
 #include <IGESBasic_Name.hxx>
 #include <IGESControl_Controller.hxx>
 #include <IGESControl_Reader.hxx>
 #include <IGESControl_Writer.hxx>
 #include <IGESData_IGESEntity.hxx>
+#endif
 #include <IMeshTools_Parameters.hxx>
 #include <Interface_InterfaceModel.hxx>
 #include <Interface_Static.hxx>
@@ -97,6 +105,13 @@ namespace fs = std::filesystem;
   throw Error(name + ": " + problem);
 }
 
+#if !FLANK_CAD_IGES
+// io/cad.cpp opens the IGES build for every IGES file; this build never sees one.
+[[noreturn]] void no_iges(const std::string& name) {
+  fail(name, "IGES needs flank's IGES module (libflank_cad_iges.so); this is the STEP one");
+}
+#endif
+
 // OCCT reports through a global messenger that prints to stdout; flank's messages are its own.
 void quiet_occt() {
   static std::once_flag once;
@@ -104,7 +119,9 @@ void quiet_occt() {
     const Handle(Message_Messenger)& messenger = Message::DefaultMessenger();
     messenger->RemovePrinters(STANDARD_TYPE(Message_PrinterOStream));
     STEPControl_Controller::Init();
+#if FLANK_CAD_IGES
     IGESControl_Controller::Init();
+#endif
   });
 }
 
@@ -178,12 +195,14 @@ std::string step_root_name(const Handle(Standard_Transient)& root) {
   return display_name(product->Id());
 }
 
+#if FLANK_CAD_IGES
 // An IGES root's name: its name property (406 form 15), else its short label.
 std::string iges_root_name(const Handle(Standard_Transient)& root) {
   const Handle(IGESData_IGESEntity) entity = Handle(IGESData_IGESEntity)::DownCast(root);
   if (entity.IsNull() || !entity->HasName()) return {};
   return display_name(entity->NameValue());
 }
+#endif
 
 // The roots the reader transferred, each with its shape and name, in the file's order.
 NamedShapes transferred_roots(XSControl_Reader& reader, std::string (*name_of)(const Handle(Standard_Transient)&)) {
@@ -206,14 +225,21 @@ std::shared_ptr<const Shape> read(const std::string& path, bool step, std::vecto
   guarded(path, std::string("reading ") + (step ? "STEP" : "IGES"), [&] {
     // Read, then transfer: a file OCCT parses but that holds no shape has no faces.
     std::unique_ptr<XSControl_Reader> reader;
-    if (step)
+    std::string (*name_of)(const Handle(Standard_Transient)&) = step_root_name;
+    if (step) {
       reader = std::make_unique<STEPControl_Reader>();
-    else
+    } else {
+#if FLANK_CAD_IGES
       reader = std::make_unique<IGESControl_Reader>();
+      name_of = iges_root_name;
+#else
+      no_iges(path);
+#endif
+    }
     if (reader->ReadFile(path.c_str()) != IFSelect_RetDone)
       fail(path, std::string("not a readable ") + (step ? "STEP" : "IGES") + " file");
     reader->TransferRoots();
-    named = transferred_roots(*reader, step ? step_root_name : iges_root_name);
+    named = transferred_roots(*reader, name_of);
     if (named.empty()) fail(path, std::string("no faces in this ") + (step ? "STEP" : "IGES") + " file (no shape to read)");
     return 0;
   });
@@ -430,12 +456,14 @@ void size(const Surface& s, int& poles_u, int& poles_v, int& degree_u, int& degr
   degree_v = s.surface->VDegree();
 }
 
-// `text` with every byte beyond ASCII replaced by `other`.
+#if FLANK_CAD_IGES
+// `text` with every byte beyond ASCII replaced by `other` (IGES's names).
 std::string ascii_only(std::string text, char other) {
   for (char& c : text)
     if (static_cast<unsigned char>(c) >= 0x80) c = other;
   return text;
 }
+#endif
 
 // The bytes of the named shapes as STEP or IGES (by extension), written through a
 // temporary file; io/cad.cpp moves them into place with write_file_atomic.
@@ -482,6 +510,7 @@ std::string document_bytes(const fs::path& path, const NamedShapes& shapes) {
       }
       done = done && writer.Write(scratch_path.c_str()) == IFSelect_RetDone;
     } else {
+#if FLANK_CAD_IGES
       Interface_Static::SetCVal("write.iges.unit", "MM");
       Interface_Static::SetIVal("write.iges.brep.mode", 1);
       IGESControl_Writer writer;
@@ -505,6 +534,9 @@ std::string document_bytes(const fs::path& path, const NamedShapes& shapes) {
       }
       writer.ComputeModel();
       done = done && writer.Write(scratch_path.c_str());
+#else
+      no_iges(name);
+#endif
     }
     if (!done) fail(name, "OCCT could not write the file");
     return 0;

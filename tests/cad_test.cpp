@@ -74,6 +74,13 @@ TEST(CadModule, OpenCascadeComesWithTheModuleNotWithTheProgram) {
   // were a third of the module's opening: none of them comes with it.
   for (const char* library : {"libTKXCAF", "libTKLCAF", "libTKV3d", "libTKService"})
     EXPECT_FALSE(mapped(library)) << library;
+  // STEP's module, which every decompose and fit opens, leaves IGES's translator and the
+  // libraries it needs (a quarter of the opening) to IGES's module, opened for IGES files.
+  for (const char* library : {"libTKIGES", "libTKBool", "libTKBO", "libflank_cad_iges"})
+    EXPECT_FALSE(mapped(library)) << library;
+  io::require_cad_module("part.igs");
+  for (const char* library : {"libTKIGES", "libTKBool", "libTKBO", "libflank_cad_iges"})
+    EXPECT_TRUE(mapped(library)) << library;
 }
 
 TEST_F(CadIo, SplineSurfaceFollowsTheExactSurfaceBetweenItsPoints) {
@@ -531,6 +538,30 @@ TEST_F(CadIo, CommandLineWithoutTheModuleRefusesOnlyCad) {
   EXPECT_EQ(info.code, 2);
   expect_clean_failure(info, (dir_ / "part.step").string() + ": ", out);
   EXPECT_NE(info.err.find("libflank_cad.so"), std::string::npos) << info.err;
+}
+
+// Without IGES's module (libflank_cad_iges.so lost), IGES files alone are refused: STEP files
+// read, and decompose writes its STEP files, through STEP's module.
+TEST_F(CadIo, CommandLineWithoutTheIgesModuleRefusesOnlyIges) {
+  const report::FittedSurface f = report::fit_exact_grid("cylinder", cylinder_grid(20, 6), 20, 6, 1e-7);
+  io::write_surfaces(dir_ / "part.step", {{"face", f.surface}});
+  io::write_surfaces(dir_ / "part.igs", {{"face", f.surface}});
+  const fs::path mesh = dir_ / "cone.stl";
+  ASSERT_EQ(cli_test::run("synth --guides seed003 --tool cone:4,7 --resolution 121x31 -o " + mesh.string()).code, 0);
+  ::setenv("FLANK_CAD_IGES_MODULE", (dir_ / "missing" / "libflank_cad_iges.so").c_str(), 1);
+  struct Unset {
+    ~Unset() { ::unsetenv("FLANK_CAD_IGES_MODULE"); }
+  } unset;
+  EXPECT_EQ(cli_test::run("info " + (dir_ / "part.step").string()).code, 0);
+  const fs::path out = dir_ / "out";
+  const cli_test::CliRun r =
+      cli_test::run("decompose " + mesh.string() + " --tool cone -q --max-patches 1 -o " + out.string());
+  EXPECT_EQ(r.code, 0) << r.err;
+  EXPECT_TRUE(fs::exists(out / "patches.step"));
+  const cli_test::CliRun info = cli_test::run("info " + (dir_ / "part.igs").string());
+  EXPECT_EQ(info.code, 2);
+  expect_clean_failure(info, (dir_ / "part.igs").string() + ": IGES files need flank's IGES module", dir_ / "none");
+  EXPECT_NE(info.err.find("libflank_cad_iges.so"), std::string::npos) << info.err;
 }
 
 // A command that ends early (here a fit refused for its gouge, after some tens of ms) while
