@@ -515,6 +515,18 @@ TEST_F(CadIo, ToleranceTooFineForTheFacesIsRefusedBeforeTessellating) {
   EXPECT_EQ(cli_test::run("info " + part.string() + " --tolerance-rel 1e-3").code, 0);
 }
 
+// An environment variable set for the commands a test runs, unset when it ends.
+class ScopedEnv {
+ public:
+  ScopedEnv(const char* name, const std::string& value) : name_(name) { ::setenv(name, value.c_str(), 1); }
+  ~ScopedEnv() { ::unsetenv(name_); }
+  ScopedEnv(const ScopedEnv&) = delete;
+  ScopedEnv& operator=(const ScopedEnv&) = delete;
+
+ private:
+  const char* name_;
+};
+
 // An installation without the CAD module (libflank_cad.so lost): what needs no CAD runs; a
 // STEP input, and decompose's patches.step, are refused in one line naming the file and the
 // module, with nothing written.
@@ -523,10 +535,7 @@ TEST_F(CadIo, CommandLineWithoutTheModuleRefusesOnlyCad) {
   io::write_surfaces(dir_ / "part.step", {{"face", f.surface}});
   const fs::path mesh = dir_ / "cone.stl";
   ASSERT_EQ(cli_test::run("synth --guides seed003 --tool cone:4,7 --resolution 121x31 -o " + mesh.string()).code, 0);
-  ::setenv("FLANK_CAD_MODULE", (dir_ / "missing" / "libflank_cad.so").c_str(), 1);
-  struct Unset {
-    ~Unset() { ::unsetenv("FLANK_CAD_MODULE"); }
-  } unset;
+  const ScopedEnv env("FLANK_CAD_MODULE", (dir_ / "missing" / "libflank_cad.so").string());
   EXPECT_EQ(cli_test::run("info " + mesh.string()).code, 0);
   EXPECT_EQ(cli_test::run("movability " + mesh.string() + " " + cli_test::kLine).code, 0);
   const fs::path out = dir_ / "out";
@@ -548,10 +557,7 @@ TEST_F(CadIo, CommandLineWithoutTheIgesModuleRefusesOnlyIges) {
   io::write_surfaces(dir_ / "part.igs", {{"face", f.surface}});
   const fs::path mesh = dir_ / "cone.stl";
   ASSERT_EQ(cli_test::run("synth --guides seed003 --tool cone:4,7 --resolution 121x31 -o " + mesh.string()).code, 0);
-  ::setenv("FLANK_CAD_IGES_MODULE", (dir_ / "missing" / "libflank_cad_iges.so").c_str(), 1);
-  struct Unset {
-    ~Unset() { ::unsetenv("FLANK_CAD_IGES_MODULE"); }
-  } unset;
+  const ScopedEnv env("FLANK_CAD_IGES_MODULE", (dir_ / "missing" / "libflank_cad_iges.so").string());
   EXPECT_EQ(cli_test::run("info " + (dir_ / "part.step").string()).code, 0);
   const fs::path out = dir_ / "out";
   const cli_test::CliRun r =
@@ -572,10 +578,7 @@ TEST_F(CadIo, CommandLineWithoutTheIgesModuleRefusesOnlyIges) {
 TEST_F(CadIo, ACommandEndingWhileTheModuleOpensWaitsForIt) {
   const fs::path mesh = dir_ / "part.stl";
   ASSERT_EQ(cli_test::run("synth --guides seed003 --tool cylinder:5 --resolution 61x21 -o " + mesh.string()).code, 0);
-  ::setenv("FLANK_CAD_MODULE", FLANK_SLOW_CAD_MODULE, 1);
-  struct Unset {
-    ~Unset() { ::unsetenv("FLANK_CAD_MODULE"); }
-  } unset;
+  const ScopedEnv env("FLANK_CAD_MODULE", FLANK_SLOW_CAD_MODULE);
   const fs::path out = dir_ / "out";
   const cli_test::CliRun r = cli_test::run("fit " + mesh.string() + " " + cli_test::kLine +
                                            " --samples-t 8 --samples-s 4 -q -o " + out.string());
