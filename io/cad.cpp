@@ -14,15 +14,15 @@
 #include <cerrno>
 #include <chrono>
 #include <cmath>
-#include <csignal>
 #include <cctype>
+#include <csignal>
 #include <cstdio>
 #include <cstdlib>
 #include <functional>
 #include <mutex>
+#include <string_view>
 #include <system_error>
 #include <thread>
-#include <string_view>
 #include <unordered_map>
 
 #include "io/cad_module.h"
@@ -147,8 +147,8 @@ class Module {
   std::atomic<const cad_module::Api*> ready_{nullptr};
 };
 
-// Whether `name` ends in .igs or .iges, in any case (no allocation: the surfaces' points ask
-// for their module at every call).
+// Whether `name` ends in .igs or .iges, in any case (no allocation: a read part's face points
+// and distances ask for their module at every call).
 bool iges_name(std::string_view name) {
   const auto ends_with = [&](std::string_view ext) {
     return name.size() >= ext.size() &&
@@ -162,7 +162,7 @@ bool iges_name(std::string_view name) {
 // surfaces, which are not files). Open CASCADE's set-up is not thread-safe, and each module sets
 // it up as it opens (the translators' controllers, a STEP writer's session): IGES's is opened
 // only once STEP's, if it is opening beside, is done. (A decompose of an IGES part opened both
-// at once and wrote a patches.step OCCT could not write, in about one run in three.)
+// at once and wrote a patches.step OCCT could not write, in 18 runs of 20.)
 const cad_module::Api& module(const std::string& name) {
   if (!iges_name(name)) return Module::instance(false).get(name);
   Module& iges = Module::instance(true);
@@ -389,6 +389,7 @@ std::string CadPart::face_name(int index) const {
 // Writing
 
 struct SplineSurface::Impl {
+  const cad_module::Api* api = nullptr;  // the module that made it
   std::shared_ptr<const cad_module::Surface> surface;
   int poles_u = 0, poles_v = 0, degree_u = 0, degree_v = 0;
 };
@@ -397,7 +398,8 @@ struct SplineSurface::Impl {
 struct CadWriter {
   static SplineSurface make(const std::string& name, std::shared_ptr<const cad_module::Surface> surface) {
     auto impl = std::make_shared<SplineSurface::Impl>();
-    module(name).size(*surface, impl->poles_u, impl->poles_v, impl->degree_u, impl->degree_v);
+    impl->api = &module(name);
+    impl->api->size(*surface, impl->poles_u, impl->poles_v, impl->degree_u, impl->degree_v);
     impl->surface = std::move(surface);
     return SplineSurface(std::move(impl));
   }
@@ -419,8 +421,7 @@ SplineSurface SplineSurface::from_poles(const std::string& name, const Points& p
   return CadWriter::make(name, module(name).from_poles(name, poles, nu, nv, knots_u, knots_v));
 }
 
-// The module was opened when the surface was made.
-Vec3 SplineSurface::point(double u, double v) const { return module("").point(*impl_->surface, u, v); }
+Vec3 SplineSurface::point(double u, double v) const { return impl_->api->point(*impl_->surface, u, v); }
 int SplineSurface::poles_u() const { return impl_->poles_u; }
 int SplineSurface::poles_v() const { return impl_->poles_v; }
 int SplineSurface::degree_u() const { return impl_->degree_u; }

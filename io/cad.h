@@ -40,7 +40,7 @@ struct CadTessellation {
 // for IGES files. A command that will write a STEP file calls this first: STEP's module is
 // then opened on a thread of its own while the command works (OCCT's libraries took 50–80 ms
 // to load on the 2-core machines here; about 40% less since the module no longer uses XCAF,
-// and a further 25% since IGES's translator has a module of its own).
+// and a further 20% since IGES's translator has a module of its own).
 void preload_cad_module();
 // Waits for a preload still opening the module; returns at once when none is. A program that
 // preloads calls this before it exits: the opening thread runs Open CASCADE's static

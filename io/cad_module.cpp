@@ -1,7 +1,7 @@
 // The CAD module: all of flank's Open CASCADE code, opened by io/cad.cpp through the table of
 // io/cad_module.h. Built twice (io/CMakeLists.txt): libflank_cad.so for STEP, and
-// libflank_cad_iges.so (FLANK_CAD_IGES) for STEP and IGES, as IGES's translator costs every
-// opening a third more; io/cad.cpp opens the second for IGES files only. Every OCCT exception
+// libflank_cad_iges.so (FLANK_CAD_IGES) for STEP and IGES, as IGES's translator makes every
+// opening a quarter longer; io/cad.cpp opens the second for IGES files only. Every OCCT exception
 // becomes io::Error with the file's name; OCCT's own console messages are switched off, so a
 // bad file gives one line and nothing else.
 #include "io/cad_module.h"
