@@ -63,9 +63,13 @@ constexpr ModuleBuild kIgesModule{"libflank_cad_iges.so", FLANK_CAD_IGES_MODULE_
 // live elsewhere).
 class Module {
  public:
-  static Module& instance(bool iges) {
-    static Module step_module(kStepModule), iges_module(kIgesModule);
-    return iges ? iges_module : step_module;
+  static Module& step() {
+    static Module module(kStepModule);
+    return module;
+  }
+  static Module& iges() {
+    static Module module(kIgesModule);
+    return module;
   }
   // Starts opening the module on a thread of its own, once, unless it is open; the thread is
   // joined by the first get() or by settle().
@@ -164,19 +168,18 @@ bool iges_name(std::string_view name) {
 // only once STEP's, if it is opening beside, is done. (A decompose of an IGES part opened both
 // at once and wrote a patches.step OCCT could not write, in 18 runs of 20.)
 const cad_module::Api& module(const std::string& name) {
-  if (!iges_name(name)) return Module::instance(false).get(name);
-  Module& iges = Module::instance(true);
-  if (!iges.ready()) Module::instance(false).settle();
-  return iges.get(name);
+  if (!iges_name(name)) return Module::step().get(name);
+  if (!Module::iges().ready()) Module::step().settle();
+  return Module::iges().get(name);
 }
 
 }  // namespace
 
 // Not once IGES's module is open: the command may be using Open CASCADE already (module()).
 void preload_cad_module() {
-  if (!Module::instance(true).ready()) Module::instance(false).preload();
+  if (!Module::iges().ready()) Module::step().preload();
 }
-void settle_cad_module() { Module::instance(false).settle(); }  // IGES's is never preloaded
+void settle_cad_module() { Module::step().settle(); }  // IGES's is never preloaded
 void require_cad_module(const std::string& name) { module(name); }
 
 bool is_cad_path(const std::string& path) {
