@@ -167,7 +167,7 @@ std::string surface_kind(const TopoDS_Face& face) {
 // Shapes with their names, in the order they are written or were read. Names travel as STEP
 // product names and IGES entity names; OCCT's XCAF documents could carry them too, but bring
 // 43 more libraries (the 3D viewer's, X11, images, fonts): 40% of the module's opening (85 ->
-// 51 ms of CPU for a stub linked to each set; twenty-seventh part of issue 13, README).
+// 51 ms of CPU for a stub linked to each set; twenty-seventh part of issue 13, docs/performance-history.md).
 using NamedShapes = std::vector<std::pair<TopoDS_Shape, std::string>>;
 
 // A name as flank shows it: decoded as UTF-8 (OCCT's STEP reader converts the file's encoded

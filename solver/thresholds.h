@@ -27,7 +27,7 @@ struct Thresholds {
   // the refit moves the motion along the radius ↔ offset valley to absorb the difference (the
   // exact cone part's barrels are 2–13τ from any cone). A bound on what the tries cost, each a
   // fit: over the 17 coverage cases 146 tries within 16τ kept 16, 15 of them within 8τ
-  // (README, Performance, fifteenth part).
+  // (docs/performance-history.md, fifteenth part).
   double simplify = 0.0;
   // No sphere of the cutter, anywhere along it, may reach deeper into Φ than this.
   double gouge = 0.0;
