@@ -55,7 +55,21 @@ SUB_STAGES = [
 ]
 # Sub-stages that do work only when decompose grows candidates (the `grown` counter): on a rung
 # where nothing was grown they measure an empty loop, so they are left out of plots and slopes.
-NEEDS_GROWN = {"fit_s", "cover_s"}
+NEEDS_GROWN = {"fit_s", "finish_s", "cover_s"}
+# Decompose's own stages in the parallel-efficiency table, from the seconds it records per
+# stage (patches.json's timing_s; the benchmark's counters): the target is >= 0.9 on every
+# stage, and the whole decompose's row can hide one that misses behind those that do not.
+EFFICIENCY_SUB_STAGES = [
+    ("index_s", "index"),
+    ("seeds_s", "seeds"),
+    ("candidates_s", "candidates"),
+    ("fit_s", "fit+grow"),
+    ("finish_s", "finish"),
+    ("cover_s", "cover"),
+]
+# A sub-stage shorter than this at one thread is left out of the table: its time is a sum of
+# pieces of microseconds over the rounds, below what a timer and a fork can resolve.
+MIN_SUB_STAGE_S = 1e-3
 # The synthetic cone, the subdivided propeller blade, then the real faces of tests/data.
 PART_ORDER = ["cone", "blade", "hecc_a", "hecc_b", "rotor_upper", "rotor_lower"]
 # Plots with one panel per part wrap into rows of at most this many panels.
@@ -79,6 +93,9 @@ class Bench:
     # process each in the scaling report, so repetition i of two benchmarks ran minutes apart
     # at most, and back to back for the 1- and 2-thread runs of one rung.
     reals: dict = field(default_factory=dict)
+    # The same for decompose's stage counters (EFFICIENCY_SUB_STAGES): {counter: {repetition
+    # index: seconds}}, so that their efficiency pairs the repetitions as the real time does.
+    counter_reps: dict = field(default_factory=dict)
     stage: str | None = None
     part: str | None = None
     tri_k: int | None = None
@@ -145,19 +162,35 @@ def _from_iterations(key, runs):
     counters = {n: statistics.median([_counters(r)[n] for r in runs if n in _counters(r)])
                 for n in names}
     return Bench(key, statistics.median(reals), statistics.median(cpus), cv, len(runs), counters,
-                 _reals_by_repetition(runs))
+                 _reals_by_repetition(runs), _counters_by_repetition(runs))
+
+
+def _by_repetition(runs, value_of):
+    """{repetition index: value_of(entry)} of iteration entries; {} unless every one has a
+    value and a distinct index (its position where the entry has none)."""
+    out = {}
+    for position, r in enumerate(runs):
+        value, index = value_of(r), r.get("repetition_index")
+        if value is None:
+            return {}
+        out[index if isinstance(index, int) else position] = value
+    return out if len(out) == len(runs) else {}
 
 
 def _reals_by_repetition(runs):
-    """{repetition index: real seconds} of iteration entries; {} unless every one has a time
-    and a distinct index (its position where the entry has none)."""
+    """{repetition index: real seconds} of iteration entries (_by_repetition)."""
+    return _by_repetition(runs, lambda r: _seconds(r, "real_time"))
+
+
+def _counters_by_repetition(runs):
+    """{counter: {repetition index: value}} for the EFFICIENCY_SUB_STAGES counters that every
+    iteration entry has (_by_repetition)."""
     out = {}
-    for position, r in enumerate(runs):
-        seconds, index = _seconds(r, "real_time"), r.get("repetition_index")
-        if seconds is None:
-            return {}
-        out[index if isinstance(index, int) else position] = seconds
-    return out if len(out) == len(runs) else {}
+    for name, _ in EFFICIENCY_SUB_STAGES:
+        values = _by_repetition(runs, lambda r: _counters(r).get(name))
+        if values:
+            out[name] = values
+    return out
 
 
 def read_gb_json(path):
@@ -191,6 +224,7 @@ def load_run(path):
         b = _from_aggregates(key, g["aggregates"]) if g["aggregates"] else None
         if b is not None:
             b.reals = _reals_by_repetition(g["iterations"])
+            b.counter_reps = _counters_by_repetition(g["iterations"])
         elif g["iterations"]:
             b = _from_iterations(key, g["iterations"])
         if b is None:
@@ -373,7 +407,8 @@ def parallel_rows(benches):
     medians ("pairs" 0); "low" and "high" are the lowest and highest efficiency of one pair
     (None without pairs): the machine's noise on that row; "ceiling" is what one fork and
     join's cost (fork_join_cost) leaves a stage of that length at best, None without
-    BM_ForkJoin in the run."""
+    BM_ForkJoin in the run. After each decompose row come its own stages' rows
+    (sub_stage_rows)."""
     rows = []
     cost = fork_join_cost(benches)
     for key in ordered_keys(benches):
@@ -384,15 +419,41 @@ def parallel_rows(benches):
         b2 = benches.get(base + "/threads:2")
         if b2 is None:
             continue
-        row = {"benchmark": base, "stage": b1.stage, "part": b1.part, "tri_k": b1.tri_k,
-               "triangles": b1.triangles, "t1_s": b1.real_s, "t2_s": b2.real_s, "pairs": 0,
-               "ceiling": efficiency_ceiling(b1.real_s, cost)}
-        for name, formula in (("speedup", speedup), ("efficiency", parallel_efficiency)):
-            value, pairs = paired(b1.reals, b2.reals, formula)
-            row[name] = value if pairs else formula(b1.real_s, b2.real_s)
-            row["pairs"] = pairs
-        values = pair_values(b1.reals, b2.reals, parallel_efficiency)
-        row["low"], row["high"] = (min(values), max(values)) if values else (None, None)
+        rows.append(_parallel_row(base, b1, b1.real_s, b2.real_s, b1.reals, b2.reals, cost))
+        if b1.stage == "decompose":
+            rows += sub_stage_rows(base, b1, b2, cost)
+    return rows
+
+
+def _parallel_row(name, b1, t1, t2, t1s, t2s, cost):
+    """One row of parallel_rows: medians t1, t2 and per-repetition times t1s, t2s."""
+    row = {"benchmark": name, "stage": b1.stage, "part": b1.part, "tri_k": b1.tri_k,
+           "triangles": b1.triangles, "t1_s": t1, "t2_s": t2, "pairs": 0,
+           "ceiling": efficiency_ceiling(t1, cost)}
+    for what, formula in (("speedup", speedup), ("efficiency", parallel_efficiency)):
+        value, pairs = paired(t1s, t2s, formula)
+        row[what] = value if pairs else formula(t1, t2)
+        row["pairs"] = pairs
+    values = pair_values(t1s, t2s, parallel_efficiency)
+    row["low"], row["high"] = (min(values), max(values)) if values else (None, None)
+    return row
+
+
+def sub_stage_rows(base, b1, b2, cost):
+    """Rows for decompose's own stages (EFFICIENCY_SUB_STAGES), named "BASE · LABEL", from the
+    1- and 2-thread runs' counters: those that take MIN_SUB_STAGE_S or more at one thread,
+    and, for the stages that only grown candidates feed (NEEDS_GROWN), where both runs grew
+    some. Paired by repetition where both runs' counters have them."""
+    rows = []
+    for counter, label in EFFICIENCY_SUB_STAGES:
+        t1, t2 = b1.counters.get(counter), b2.counters.get(counter)
+        if t1 is None or t2 is None or t1 < MIN_SUB_STAGE_S:
+            continue
+        if counter in NEEDS_GROWN and not (b1.counters.get("grown", 1) and b2.counters.get("grown", 1)):
+            continue
+        row = _parallel_row(f"{base} · {label}", b1, t1, t2, b1.counter_reps.get(counter, {}),
+                            b2.counter_reps.get(counter, {}), cost)
+        row["stage"] = f"decompose: {label}"
         rows.append(row)
     return rows
 
@@ -808,6 +869,12 @@ def build_markdown(title, run_path, context, benches, base_path, base, lad):
                 f"t1 ≥ {human_time(18 * cost)}. The ceiling column is that bound for each row; "
                 f"where the efficiency is under 0.9 and so is the ceiling, the stage is too short "
                 f"for this machine's thread wake-ups, whatever its code.", ""]
+    out += ["Rows `… · index`, `· seeds`, `· candidates`, `· fit+grow`, `· finish` and `· cover` "
+            "under a decompose row are that decompose's own stages, from the seconds it records "
+            "for each (its `patches.json`'s `timing_s`), paired by repetition in the same way; "
+            f"a stage under {human_time(MIN_SUB_STAGE_S)} at one thread is left out. Each sums "
+            "the stage over the rounds, so it forks many times: the ceiling, one fork's, is "
+            "only an upper bound for it.", ""]
     rows = parallel_rows(benches)
     out.append(md_table(
         ["benchmark", "t (1 thread)", "t (2 threads)", "speed-up", "efficiency", "pairs' range",

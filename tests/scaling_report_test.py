@@ -187,6 +187,50 @@ class ScalingReportTest(unittest.TestCase):
         self.assertEqual(par["Ladder/index/cone/tri_k:4"]["pairs"], 0)
         self.assertAlmostEqual(par["Ladder/index/cone/tri_k:4"]["efficiency"], 1 / (2 * 0.55))
 
+    def test_decompose_stages_get_rows_of_their_own(self):
+        # Two repetitions of one decompose rung: the whole decompose scales (0.95), its seeds
+        # and cover do not (serial: the same time at two threads), candidates do; the index is
+        # under MIN_SUB_STAGE_S and is left out; the second repetition lacks finish_s, so
+        # finish's row is the ratio of the medians, unpaired.
+        key = "Ladder/decompose/hecc_a/tri_k:24/threads:"
+        entries = []
+        for rep, slow in ((0, 1.0), (1, 1.2)):
+            for t in (1, 2):
+                c = {"index_s": 0.0005, "seeds_s": 0.014 * slow, "candidates_s": 1.2 * slow / t,
+                     "cover_s": 0.004 * slow, "grown": 40.0}
+                if rep == 0:
+                    c["finish_s"] = 0.9 / t
+                real = 3.2 * slow / (1 if t == 1 else 1.9)
+                entries.append({"name": f"{key}{t}/real_time", "run_name": f"{key}{t}/real_time",
+                                "run_type": "iteration", "repetitions": 2, "repetition_index": rep,
+                                "iterations": 1, "real_time": real, "cpu_time": real,
+                                "time_unit": "s", **c})
+        _, benches = sr.load_run(self.write("sub.json", {"context": {}, "benchmarks": entries}))
+        self.assertEqual(benches[key + "1"].counter_reps["seeds_s"], {0: 0.014, 1: 0.014 * 1.2})
+        self.assertNotIn("finish_s", benches[key + "1"].counter_reps)
+        rows = sr.parallel_rows(benches)
+        names = [r["benchmark"] for r in rows]
+        base = "Ladder/decompose/hecc_a/tri_k:24"
+        self.assertEqual(names, [base, base + " · seeds", base + " · candidates",
+                                 base + " · finish", base + " · cover"])
+        par = {r["benchmark"]: r for r in rows}
+        self.assertAlmostEqual(par[base]["efficiency"], 0.95)
+        self.assertEqual(par[base + " · seeds"]["pairs"], 2)
+        self.assertAlmostEqual(par[base + " · seeds"]["efficiency"], 0.5)
+        self.assertAlmostEqual(par[base + " · candidates"]["efficiency"], 1.0)
+        self.assertEqual(par[base + " · finish"]["pairs"], 0)
+        self.assertEqual(par[base + " · seeds"]["stage"], "decompose: seeds")
+        # Serial stages miss in every pair; the report names them beside the benchmarks.
+        self.assertEqual(sr.below_in_every_pair(rows), ([], [base + " · seeds", base + " · cover"]))
+        md = sr.build_markdown("t", "run.json", {}, benches, None, None, sr.ladder(benches))
+        self.assertIn(f"| `{base} · cover` | 4.40 ms | 4.40 ms | 1.00 | 0.500 | 0.500–0.500 |", md)
+        # A rung that grew nothing has no fit, finish or cover to judge.
+        for e in entries:
+            e["grown"] = 0.0
+        _, benches = sr.load_run(self.write("none.json", {"context": {}, "benchmarks": entries}))
+        names = [r["benchmark"] for r in sr.parallel_rows(benches)]
+        self.assertEqual(names, [base, base + " · seeds", base + " · candidates"])
+
     def test_a_row_misses_only_when_every_pair_does(self):
         def row(name, low, high, ceiling):
             return {"benchmark": name, "low": low, "high": high, "ceiling": ceiling}
