@@ -3,7 +3,27 @@
 #include <algorithm>
 #include <numeric>
 
+#include "kernels/parallel.h"
+
 namespace flank {
+
+// The cover's loops judge every entry of the pool (or every pick) against the same state, so
+// each entry's sum is computed on its own, in parallel, into per-entry storage, and the choice
+// is made after, serially, in the order and with the tie rules the serial loops had: the
+// result is the same bit for bit whatever the thread count. An entry sums a patch's covered
+// vertices, a few thousand: a few microseconds, hence small grains.
+namespace {
+constexpr std::size_t kGrain = 2;
+
+// Σ area(v) over v in `vertices` where keep(v), in the list's order.
+template <class Keep>
+double area_where(const std::vector<int>& vertices, const VecX& area, Keep&& keep) {
+  double sum = 0.0;
+  for (int v : vertices)
+    if (keep(static_cast<std::size_t>(v))) sum += area(v);
+  return sum;
+}
+}  // namespace
 
 Cover empty_cover(const VecX& area) {
   Cover c;
@@ -18,13 +38,17 @@ void greedy_cover(const std::vector<Patch>& pool, const VecX& area, const CoverO
     const int id = static_cast<int>(c->picks.size());
     if (id >= o.max_patches) break;
     if (c->covered_area >= o.coverage_target * c->total_area) break;
+    std::vector<double> gains(pool.size(), 0.0);
+    parallel_for(0, pool.size(), [&](std::size_t b, std::size_t e) {
+      for (std::size_t k = b; k < e; ++k)
+        if (!c->used[k])
+          gains[k] = area_where(pool[k].covered_vertices, area, [&](std::size_t v) { return c->vertex_patch[v] < 0; });
+    }, kGrain);
     int pick = -1;
     double best_gain = 0.0;
     for (std::size_t k = 0; k < pool.size(); ++k) {
       if (c->used[k]) continue;
-      double gain = 0.0;
-      for (int v : pool[k].covered_vertices)
-        if (c->vertex_patch[static_cast<std::size_t>(v)] < 0) gain += area(v);
+      const double gain = gains[k];
       const bool better = pick < 0 || gain > best_gain ||
                           (gain == best_gain && pool[k].error.max < pool[static_cast<std::size_t>(pick)].error.max);
       if (better) pick = static_cast<int>(k), best_gain = gain;
@@ -48,25 +72,37 @@ void improve_cover(const std::vector<Patch>& pool, const VecX& area, int max_swa
     for (int v : pool[static_cast<std::size_t>(k)].covered_vertices) ++count[static_cast<std::size_t>(v)];
   }
   std::vector<int> picks = c->picks;
+  struct Swap {
+    double delta;
+    int in = -1;
+  };
   for (int swap = 0; swap < max_swaps; ++swap) {
-    double best_delta = 1e-9 * c->total_area;  // a swap must gain more than rounding
+    const double least = 1e-9 * c->total_area;  // a swap must gain more than rounding
+    // Per pick taken out, the best patch to put in (the first at the largest gain over
+    // `least`), each on its own copy of the counts; then the first pick at the largest.
+    std::vector<Swap> best(picks.size(), Swap{least});
+    parallel_for(0, picks.size(), [&](std::size_t b, std::size_t e) {
+      std::vector<int> own = count;
+      for (std::size_t i = b; i < e; ++i) {
+        const Patch& out = pool[static_cast<std::size_t>(picks[i])];
+        double loss = 0.0;
+        for (int v : out.covered_vertices) {
+          if (own[static_cast<std::size_t>(v)] == 1) loss += area(v);
+          --own[static_cast<std::size_t>(v)];
+        }
+        for (std::size_t j = 0; j < pool.size(); ++j) {
+          if (picked[j]) continue;
+          const double gain = area_where(pool[j].covered_vertices, area, [&](std::size_t v) { return own[v] == 0; });
+          if (gain - loss > best[i].delta) best[i] = {gain - loss, static_cast<int>(j)};
+        }
+        for (int v : out.covered_vertices) ++own[static_cast<std::size_t>(v)];
+      }
+    }, 1);
+    double best_delta = least;
     int best_out = -1, best_in = -1;
-    for (std::size_t i = 0; i < picks.size(); ++i) {
-      const Patch& out = pool[static_cast<std::size_t>(picks[i])];
-      double loss = 0.0;
-      for (int v : out.covered_vertices) {
-        if (count[static_cast<std::size_t>(v)] == 1) loss += area(v);
-        --count[static_cast<std::size_t>(v)];
-      }
-      for (std::size_t j = 0; j < pool.size(); ++j) {
-        if (picked[j]) continue;
-        double gain = 0.0;
-        for (int v : pool[j].covered_vertices)
-          if (count[static_cast<std::size_t>(v)] == 0) gain += area(v);
-        if (gain - loss > best_delta) best_delta = gain - loss, best_out = static_cast<int>(i), best_in = static_cast<int>(j);
-      }
-      for (int v : out.covered_vertices) ++count[static_cast<std::size_t>(v)];
-    }
+    for (std::size_t i = 0; i < picks.size(); ++i)
+      if (best[i].in >= 0 && best[i].delta > best_delta)
+        best_delta = best[i].delta, best_out = static_cast<int>(i), best_in = best[i].in;
     if (best_out < 0) break;
     for (int v : pool[static_cast<std::size_t>(picks[best_out])].covered_vertices) --count[static_cast<std::size_t>(v)];
     for (int v : pool[static_cast<std::size_t>(best_in)].covered_vertices) ++count[static_cast<std::size_t>(v)];
@@ -95,54 +131,67 @@ Cover cover_in_order(const std::vector<Patch>& pool, const VecX& area, const std
 }
 }  // namespace
 
+namespace {
+// Greedy order of `picks`: largest gain first, ties to the lower error, then the lower index.
+std::vector<int> greedy_order(const std::vector<Patch>& pool, const VecX& area, const std::vector<int>& picks) {
+  std::vector<int> greedy;
+  std::vector<char> covered(static_cast<std::size_t>(area.size()), 0), taken(picks.size(), 0);
+  for (std::size_t step = 0; step < picks.size(); ++step) {
+    int best = -1;
+    double best_gain = -1.0;
+    for (std::size_t i = 0; i < picks.size(); ++i) {
+      if (taken[i]) continue;
+      const Patch& p = pool[static_cast<std::size_t>(picks[i])];
+      const double gain = area_where(p.covered_vertices, area, [&](std::size_t v) { return !covered[v]; });
+      const bool better = best < 0 || gain > best_gain ||
+                          (gain == best_gain && p.error.max < pool[static_cast<std::size_t>(picks[best])].error.max);
+      if (better) best = static_cast<int>(i), best_gain = gain;
+    }
+    taken[static_cast<std::size_t>(best)] = 1;
+    greedy.push_back(picks[static_cast<std::size_t>(best)]);
+    for (int v : pool[static_cast<std::size_t>(greedy.back())].covered_vertices) covered[static_cast<std::size_t>(v)] = 1;
+  }
+  return greedy;
+}
+
+// Backward elimination of `picks`: drop the pick that loses the least area, ties the higher
+// index; the order is the reverse of the drops.
+std::vector<int> elimination_order(const std::vector<Patch>& pool, const VecX& area, const std::vector<int>& picks) {
+  std::vector<int> eliminated;
+  std::vector<int> count(static_cast<std::size_t>(area.size()), 0);
+  for (int k : picks)
+    for (int v : pool[static_cast<std::size_t>(k)].covered_vertices) ++count[static_cast<std::size_t>(v)];
+  std::vector<char> gone(picks.size(), 0);
+  for (std::size_t step = 0; step < picks.size(); ++step) {
+    int worst = -1;
+    double worst_loss = 0.0;
+    for (std::size_t i = picks.size(); i-- > 0;) {
+      if (gone[i]) continue;
+      const double loss = area_where(pool[static_cast<std::size_t>(picks[i])].covered_vertices, area,
+                                     [&](std::size_t v) { return count[v] == 1; });
+      if (worst < 0 || loss < worst_loss) worst = static_cast<int>(i), worst_loss = loss;
+    }
+    gone[static_cast<std::size_t>(worst)] = 1;
+    eliminated.push_back(picks[static_cast<std::size_t>(worst)]);
+    for (int v : pool[static_cast<std::size_t>(eliminated.back())].covered_vertices) --count[static_cast<std::size_t>(v)];
+  }
+  std::reverse(eliminated.begin(), eliminated.end());
+  return eliminated;
+}
+}  // namespace
+
 Cover order_cover(const std::vector<Patch>& pool, const VecX& area, std::vector<int> picks) {
   std::sort(picks.begin(), picks.end());
-  // Greedy: largest gain first, ties to the lower pool index.
-  std::vector<int> greedy;
-  {
-    std::vector<char> covered(static_cast<std::size_t>(area.size()), 0), taken(picks.size(), 0);
-    for (std::size_t step = 0; step < picks.size(); ++step) {
-      int best = -1;
-      double best_gain = -1.0;
-      for (std::size_t i = 0; i < picks.size(); ++i) {
-        if (taken[i]) continue;
-        const Patch& p = pool[static_cast<std::size_t>(picks[i])];
-        double gain = 0.0;
-        for (int v : p.covered_vertices)
-          if (!covered[static_cast<std::size_t>(v)]) gain += area(v);
-        const bool better = best < 0 || gain > best_gain ||
-                            (gain == best_gain && p.error.max < pool[static_cast<std::size_t>(picks[best])].error.max);
-        if (better) best = static_cast<int>(i), best_gain = gain;
-      }
-      taken[static_cast<std::size_t>(best)] = 1;
-      greedy.push_back(picks[static_cast<std::size_t>(best)]);
-      for (int v : pool[static_cast<std::size_t>(greedy.back())].covered_vertices) covered[static_cast<std::size_t>(v)] = 1;
-    }
-  }
-  // Backward elimination: drop the pick that loses the least area, ties the higher pool index.
-  std::vector<int> eliminated;
-  {
-    std::vector<int> count(static_cast<std::size_t>(area.size()), 0);
-    for (int k : picks)
-      for (int v : pool[static_cast<std::size_t>(k)].covered_vertices) ++count[static_cast<std::size_t>(v)];
-    std::vector<char> gone(picks.size(), 0);
-    for (std::size_t step = 0; step < picks.size(); ++step) {
-      int worst = -1;
-      double worst_loss = 0.0;
-      for (std::size_t i = picks.size(); i-- > 0;) {
-        if (gone[i]) continue;
-        double loss = 0.0;
-        for (int v : pool[static_cast<std::size_t>(picks[i])].covered_vertices)
-          if (count[static_cast<std::size_t>(v)] == 1) loss += area(v);
-        if (worst < 0 || loss < worst_loss) worst = static_cast<int>(i), worst_loss = loss;
-      }
-      gone[static_cast<std::size_t>(worst)] = 1;
-      eliminated.push_back(picks[static_cast<std::size_t>(worst)]);
-      for (int v : pool[static_cast<std::size_t>(eliminated.back())].covered_vertices) --count[static_cast<std::size_t>(v)];
-    }
-    std::reverse(eliminated.begin(), eliminated.end());
-  }
-  Cover a = cover_in_order(pool, area, greedy), b = cover_in_order(pool, area, eliminated);
+  // The two orders and their covers are independent: one task each. (Their steps, a dozen
+  // sums each over a dozen picks, are too short to split: a fork per step cost more than
+  // it saved.)
+  Cover a, b;
+  parallel_invoke_each(2, [&](std::size_t task) {
+    if (task == 0)
+      a = cover_in_order(pool, area, greedy_order(pool, area, picks));
+    else
+      b = cover_in_order(pool, area, elimination_order(pool, area, picks));
+  });
   double sa = 0.0, sb = 0.0;
   for (double x : a.curve) sa += x;
   for (double x : b.curve) sb += x;

@@ -10,6 +10,8 @@
 #include <random>
 #include <vector>
 
+#include "kernels/parallel.h"
+
 namespace flank {
 namespace {
 
@@ -380,6 +382,43 @@ TEST(ImproveCover, NeverLosesAreaAndEndsAtASwapLocalOptimum) {
   EXPECT_GE(optimal, instances * 9 / 10);
   std::printf("[ improve ] optimum reached in %d of %d instances (greedy alone: %d)\n", optimal, instances,
               greedy_optimal);
+}
+
+// The cover's sums run in parallel, each into its own slot, and the choices are made after,
+// serially: the same cover at one thread and at two, ties included. Pools large enough to be
+// split (dozens of patches over thousands of vertices), with areas from three values and
+// errors from two, so that equal gains are common and the tie rules decide.
+TEST(GreedyCover, SameCoverWhateverTheThreadCount) {
+  std::mt19937 rng(7);
+  for (int trial = 0; trial < 12; ++trial) {
+    const int V = 2000 + static_cast<int>(rng() % 2000), P = 20 + static_cast<int>(rng() % 40);
+    VecX area(V);
+    for (int v = 0; v < V; ++v) area(v) = 0.5 * (1 + static_cast<int>(rng() % 3));
+    std::vector<Patch> pool;
+    for (int k = 0; k < P; ++k) {
+      std::vector<int> verts;
+      const int first = static_cast<int>(rng() % V), len = 1 + static_cast<int>(rng() % (V / 4));
+      for (int i = 0; i < len; ++i) verts.push_back((first + i) % V);
+      pool.push_back(make_patch(verts, 0.01 * static_cast<double>(rng() % 2)));
+    }
+    if (trial % 3 == 0) pool.push_back(pool[rng() % pool.size()]);  // an exact duplicate
+    CoverOptions o;
+    o.coverage_target = 0.99, o.max_patches = 4 + trial % 6, o.min_gain = 0.001;
+    std::vector<Cover> covers;
+    for (const int threads : {1, 2}) {
+      const ThreadLimit limit(threads);
+      Cover c = empty_cover(area);
+      greedy_cover(pool, area, o, &c);
+      improve_cover(pool, area, 8, &c);
+      covers.push_back(c);
+    }
+    SCOPED_TRACE(::testing::Message() << "trial " << trial);
+    EXPECT_EQ(covers[0].picks, covers[1].picks);
+    EXPECT_EQ(covers[0].curve, covers[1].curve);
+    EXPECT_EQ(covers[0].vertex_patch, covers[1].vertex_patch);
+    EXPECT_EQ(covers[0].covered_area, covers[1].covered_area);
+    expect_cover_consistent(pool, area, covers[1], true);
+  }
 }
 
 // order_cover returns the picks themselves, in an order that covers at least as much summed
