@@ -272,7 +272,8 @@ class Decomposition {
         say_(say),
         out_(out),
         area_(vertex_areas(mesh_)),
-        cover_(empty_cover(area_)) {
+        cover_(empty_cover(area_)),
+        tiler_(mesh_) {
     out_.total_area = cover_.total_area;
   }
 
@@ -311,6 +312,7 @@ class Decomposition {
   DecomposeResult& out_;
   const VecX area_;
   Cover cover_;
+  SeedTiler tiler_;               // Φ's scale and vertex grids, kept over the rounds
 
   std::vector<Patch> pool_;       // every valid candidate patch, in a deterministic order
   std::vector<char> finished_;    // per pool entry: replaced by its finished patch
@@ -384,7 +386,7 @@ std::vector<Seed> Decomposition::seeds(int round) {
     so.allowed.assign(static_cast<std::size_t>(mesh_.vertex_count()), 0);
     for (int v = 0; v < mesh_.vertex_count(); ++v) so.allowed[v] = cover_.vertex_patch[v] < 0;
   }
-  std::vector<Seed> seeds = seed_tiles(mesh_, so);
+  std::vector<Seed> seeds = tiler_(so);
   out_.times.seeds += since(t0);
   out_.seeds += static_cast<int>(seeds.size());
   return seeds;

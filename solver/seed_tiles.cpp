@@ -7,7 +7,10 @@
 #include <cmath>
 #include <cstdint>
 #include <limits>
+#include <memory>
+#include <optional>
 #include <tuple>
+#include <utility>
 
 #include "kernels/parallel.h"
 
@@ -30,6 +33,12 @@ inline double dist2(double ax, double ay, double az, double bx, double by, doubl
   const double dx = ax - bx, dy = ay - by, dz = az - bz;
   return dx * dx + dy * dy + dz * dz;
 }
+
+}  // namespace
+
+// What SeedTiler keeps over its calls: in a named namespace, not an anonymous one, as its Impl
+// (a member of a class with linkage) holds them.
+namespace seed_tiling {
 
 struct MeshScale {
   double mean_edge = 0.0;
@@ -139,6 +148,13 @@ class VertexGrid {
   std::vector<int> order_;  // vertex indices by cell
   std::vector<int> occupied_;
 };
+
+}  // namespace seed_tiling
+
+namespace {
+
+using seed_tiling::MeshScale;
+using seed_tiling::VertexGrid;
 
 // Farthest-point sampling with per-cell pruning: a cell is revisited only when the new seed
 // is nearer to its bounding box than the cell's current farthest vertex, which cannot change
@@ -313,7 +329,24 @@ void fit_curvature(const Mesh& mesh, const VertexGrid& grid, double radius, Seed
 
 }  // namespace
 
-std::vector<Seed> seed_tiles(const Mesh& mesh, const SeedOptions& options) {
+struct SeedTiler::Impl {
+  const Mesh& mesh;
+  std::optional<seed_tiling::MeshScale> scale;
+  std::vector<std::pair<double, std::unique_ptr<seed_tiling::VertexGrid>>> grids;  // by cell size
+
+  const seed_tiling::VertexGrid& grid(double cell) {
+    for (const auto& [size, g] : grids)
+      if (size == cell) return *g;
+    grids.emplace_back(cell, std::make_unique<seed_tiling::VertexGrid>(mesh.V, cell));
+    return *grids.back().second;
+  }
+};
+
+SeedTiler::SeedTiler(const Mesh& mesh) : impl_(std::make_unique<Impl>(Impl{mesh, {}, {}})) {}
+SeedTiler::~SeedTiler() = default;
+
+std::vector<Seed> SeedTiler::operator()(const SeedOptions& options) {
+  const Mesh& mesh = impl_->mesh;
   assert(options.validate().empty());
   assert(options.allowed.empty() ||
          options.allowed.size() == static_cast<std::size_t>(mesh.vertex_count()));
@@ -322,12 +355,13 @@ std::vector<Seed> seed_tiles(const Mesh& mesh, const SeedOptions& options) {
       options.allowed.size() != static_cast<std::size_t>(mesh.vertex_count()))
     return {};
 
-  const MeshScale scale = mesh_scale(mesh);
+  if (!impl_->scale) impl_->scale = seed_tiling::mesh_scale(mesh);
+  const seed_tiling::MeshScale& scale = *impl_->scale;
   // Cells of about √#V vertices balance the per-seed scan over cells against the vertices
   // of the cells a seed touches; never much below the spacing, the scale of the late seeds.
   const double density_cell =
       std::sqrt(scale.area / std::sqrt(static_cast<double>(mesh.vertex_count())));
-  const VertexGrid grid(mesh.V, std::max(options.spacing / 2, density_cell));
+  const seed_tiling::VertexGrid& grid = impl_->grid(std::max(options.spacing / 2, density_cell));
 
   const std::vector<int> chosen = farthest_points(mesh, grid, options);
   const std::vector<Vec3> normals = seed_normals(mesh, chosen);
@@ -346,6 +380,10 @@ std::vector<Seed> seed_tiles(const Mesh& mesh, const SeedOptions& options) {
       },
       4);
   return seeds;
+}
+
+std::vector<Seed> seed_tiles(const Mesh& mesh, const SeedOptions& options) {
+  return SeedTiler(mesh)(options);
 }
 
 }  // namespace flank

@@ -3,6 +3,7 @@
 // candidate lines are laid out in — normal, principal directions and curvatures.
 #pragma once
 
+#include <memory>
 #include <string>
 #include <vector>
 
@@ -43,5 +44,22 @@ struct SeedOptions {
 // Deterministic and independent of the thread count. Empty if the options are invalid or
 // `allowed` is neither empty nor #V long.
 std::vector<Seed> seed_tiles(const Mesh& mesh, const SeedOptions& options);
+
+// seed_tiles on one mesh, called again and again (a decomposition seeds each round): what
+// does not depend on the options, the mesh's scale and the vertex grid of each cell size
+// asked, is made once and kept. The same seeds as seed_tiles. Keeps a reference to the mesh;
+// not for concurrent calls.
+class SeedTiler {
+ public:
+  explicit SeedTiler(const Mesh& mesh);
+  ~SeedTiler();
+  SeedTiler(const SeedTiler&) = delete;
+  SeedTiler& operator=(const SeedTiler&) = delete;
+  std::vector<Seed> operator()(const SeedOptions& options);
+
+ private:
+  struct Impl;
+  std::unique_ptr<Impl> impl_;
+};
 
 }  // namespace flank

@@ -305,6 +305,27 @@ TEST(SeedTiles, DeterministicAcrossCallsAndThreads) {
   expect_same(a, one);
 }
 
+// A tiler kept over calls (as a decomposition's rounds call it: the whole sheet, then what a
+// mask leaves, at half the spacing, then the first spacing again) gives what a fresh
+// seed_tiles gives for each call.
+TEST(SeedTiles, TilerKeptOverCallsGivesTheSameSeeds) {
+  const Mesh mesh = wavy_sheet(120, 8);
+  SeedTiler tiler(mesh);
+  SeedOptions whole;
+  whole.spacing = 2.0;
+  SeedOptions masked;
+  masked.spacing = 1.0;
+  masked.allowed.assign(static_cast<std::size_t>(mesh.vertex_count()), 0);
+  for (int v = 0; v < mesh.vertex_count(); ++v) masked.allowed[static_cast<std::size_t>(v)] = mesh.V(v, 0) > 5.0;
+  SeedOptions fine;
+  fine.spacing = 0.3;
+  for (const SeedOptions* o : {&whole, &masked, &fine, &whole, &masked}) {
+    const std::vector<Seed> kept = tiler(*o);
+    ASSERT_FALSE(kept.empty());
+    expect_same(kept, seed_tiles(mesh, *o));
+  }
+}
+
 // Not asserted: the time for a 1M-vertex sheet at ~200 seeds.
 TEST(SeedTiles, TimingOneMillionVertices) {
   const Mesh mesh = grid_mesh(999, 999, [](double u, double v) {
