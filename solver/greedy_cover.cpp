@@ -34,11 +34,11 @@ Cover empty_cover(const VecX& area) {
 
 void greedy_cover(const std::vector<Patch>& pool, const VecX& area, const CoverOptions& o, Cover* c) {
   c->used.resize(pool.size(), 0);
+  std::vector<double> gains(pool.size(), 0.0);  // per pool entry, of this pick
   for (int picked = 0; o.max_picks <= 0 || picked < o.max_picks; ++picked) {
     const int id = static_cast<int>(c->picks.size());
     if (id >= o.max_patches) break;
     if (c->covered_area >= o.coverage_target * c->total_area) break;
-    std::vector<double> gains(pool.size(), 0.0);
     parallel_for(0, pool.size(), [&](std::size_t b, std::size_t e) {
       for (std::size_t k = b; k < e; ++k)
         if (!c->used[k])

@@ -8,7 +8,6 @@
 #include <cstdint>
 #include <limits>
 #include <memory>
-#include <optional>
 #include <tuple>
 #include <utility>
 
@@ -330,8 +329,10 @@ void fit_curvature(const Mesh& mesh, const VertexGrid& grid, double radius, Seed
 }  // namespace
 
 struct SeedTiler::Impl {
+  explicit Impl(const Mesh& m) : mesh(m), scale(seed_tiling::mesh_scale(m)) {}
+
   const Mesh& mesh;
-  std::optional<seed_tiling::MeshScale> scale;
+  const seed_tiling::MeshScale scale;
   std::vector<std::pair<double, std::unique_ptr<seed_tiling::VertexGrid>>> grids;  // by cell size
 
   const seed_tiling::VertexGrid& grid(double cell) {
@@ -342,7 +343,7 @@ struct SeedTiler::Impl {
   }
 };
 
-SeedTiler::SeedTiler(const Mesh& mesh) : impl_(std::make_unique<Impl>(Impl{mesh, {}, {}})) {}
+SeedTiler::SeedTiler(const Mesh& mesh) : impl_(std::make_unique<Impl>(mesh)) {}
 SeedTiler::~SeedTiler() = default;
 
 std::vector<Seed> SeedTiler::operator()(const SeedOptions& options) {
@@ -355,8 +356,7 @@ std::vector<Seed> SeedTiler::operator()(const SeedOptions& options) {
       options.allowed.size() != static_cast<std::size_t>(mesh.vertex_count()))
     return {};
 
-  if (!impl_->scale) impl_->scale = seed_tiling::mesh_scale(mesh);
-  const seed_tiling::MeshScale& scale = *impl_->scale;
+  const seed_tiling::MeshScale& scale = impl_->scale;
   // Cells of about √#V vertices balance the per-seed scan over cells against the vertices
   // of the cells a seed touches; never much below the spacing, the scale of the late seeds.
   const double density_cell =

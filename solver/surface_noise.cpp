@@ -136,7 +136,8 @@ NoiseEstimate estimate_noise(const Mesh& mesh) {
   each_vertex(V, [&](int v, std::vector<int>& mark, std::vector<int>& ring) {
     const Projection p = project(mesh, adj, normals, v, mark, ring, v, 2);
     // The residual of a least-squares fit at a point it includes has variance σ²(1 − h).
-    if (p.ok && p.leverage < 0.95) scaled[static_cast<std::size_t>(v)] = std::abs(p.residual) / std::sqrt(1.0 - p.leverage);
+    if (p.ok && p.leverage < 0.95)
+      scaled[static_cast<std::size_t>(v)] = std::abs(p.residual) / std::sqrt(1.0 - p.leverage);
   });
   std::vector<double> values;
   for (double s : scaled)
