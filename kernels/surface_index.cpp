@@ -695,18 +695,19 @@ ClosestPoint SurfaceIndex::Impl::query_once(const Vec3& p, int hint_face, double
 
 SurfaceIndex::SurfaceIndex(const Mesh& mesh, QueryEngine engine) : SurfaceIndex(mesh, engine, kInf) {}
 
-SurfaceIndex SurfaceIndex::within_reach(const Mesh& mesh, double reach) {
+SurfaceIndex SurfaceIndex::within_reach(Mesh mesh, double reach) {
   if (!(reach > 0.0) || !std::isfinite(reach))
     throw std::invalid_argument("SurfaceIndex::within_reach: the reach must be positive and finite");
-  return SurfaceIndex(mesh, QueryEngine::kCells, reach);
+  return SurfaceIndex(std::move(mesh), QueryEngine::kCells, reach);
 }
 
-SurfaceIndex::SurfaceIndex(const Mesh& mesh, QueryEngine engine, double reach)
+SurfaceIndex::SurfaceIndex(Mesh mesh_given, QueryEngine engine, double reach)
     : impl_(std::make_unique<Impl>()) {
   Impl& m = *impl_;
   m.engine = engine;
   m.reach = reach;
-  m.mesh = mesh;
+  m.mesh = std::move(mesh_given);
+  const Mesh& mesh = m.mesh;
   const int nf = mesh.face_count();
   if (m.engine == QueryEngine::kCells) {
     // An index for a few bounded queries (Ω's): its two builds are mostly serial, the faces'
@@ -725,12 +726,16 @@ SurfaceIndex::SurfaceIndex(const Mesh& mesh, QueryEngine engine, double reach)
       }
       // Each face's box grown by the reach (a little wider, and by the coordinates'
       // rounding): a point within the reach of a face lies in the grown box.
-      std::vector<Vec3> lo(static_cast<std::size_t>(nf)), hi(static_cast<std::size_t>(nf));
-      for (int f = 0; f < nf; ++f) {
-        const Vec3 a = mesh.V.row(mesh.F(f, 0)), b = mesh.V.row(mesh.F(f, 1)), c = mesh.V.row(mesh.F(f, 2));
-        lo[static_cast<std::size_t>(f)] = (a.cwiseMin(b).cwiseMin(c).array() - grow).matrix();
-        hi[static_cast<std::size_t>(f)] = (a.cwiseMax(b).cwiseMax(c).array() + grow).matrix();
-      }
+      Buffer<Vec3> lo(static_cast<std::size_t>(nf)), hi(static_cast<std::size_t>(nf));
+      parallel_for(0, static_cast<std::size_t>(nf), [&](std::size_t begin, std::size_t end) {
+        for (std::size_t f = begin; f < end; ++f) {
+          const auto i = static_cast<Eigen::Index>(f);
+          const Vec3 a = mesh.V.row(mesh.F(i, 0)), b = mesh.V.row(mesh.F(i, 1));
+          const Vec3 c = mesh.V.row(mesh.F(i, 2));
+          lo[f] = (a.cwiseMin(b).cwiseMin(c).array() - grow).matrix();
+          hi[f] = (a.cwiseMax(b).cwiseMax(c).array() + grow).matrix();
+        }
+      }, 4096);
       m.cells = CellGrid(lo, hi);
     });
     return;

@@ -48,8 +48,8 @@ class SurfaceIndex {
   explicit SurfaceIndex(const Mesh& mesh, QueryEngine engine = QueryEngine::kBoxTree);
   // An index for closest_points_within with max_distance ≤ reach (> 0, finite) only
   // (QueryEngine::kCells), with the same answers as the box tree's; any other query throws
-  // std::logic_error.
-  static SurfaceIndex within_reach(const Mesh& mesh, double reach);
+  // std::logic_error. The index keeps `mesh` (moved in, where the caller is done with it).
+  static SurfaceIndex within_reach(Mesh mesh, double reach);
   ~SurfaceIndex();
   SurfaceIndex(SurfaceIndex&&) noexcept;
   SurfaceIndex& operator=(SurfaceIndex&&) noexcept;
@@ -95,7 +95,7 @@ class SurfaceIndex {
   void record_queries(std::vector<RecordedQuery>* log);
 
  private:
-  SurfaceIndex(const Mesh& mesh, QueryEngine engine, double reach);
+  SurfaceIndex(Mesh mesh, QueryEngine engine, double reach);
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };

@@ -140,29 +140,54 @@ std::vector<SampleClass> classify_samples(const ErrorGrid& grid, double toleranc
 namespace {
 
 // Ω as a mesh over the grid: two triangles per cell whose corners all have an envelope point.
-// `keep` (optional) further restricts the corners.
+// `keep` (optional) further restricts the corners. The rows of cells in parallel: which of
+// each cell's two triangles are faces, then, after counting, each row's faces at its place,
+// in the order of one pass over the rows.
 Mesh envelope_mesh(const ErrorGrid& grid, const std::vector<char>* keep) {
   const int rows = grid.rows, cols = grid.cols;
-  std::vector<Eigen::Vector3i> faces;
-  auto ok = [&](int k) {
+  const auto ok = [&](int k) {
     return grid.omega_valid[static_cast<std::size_t>(k)] && (!keep || (*keep)[static_cast<std::size_t>(k)]);
   };
-  auto add = [&](int p, int q, int r) {
-    if (!ok(p) || !ok(q) || !ok(r)) return;
+  const auto is_face = [&](int p, int q, int r) {
+    if (!ok(p) || !ok(q) || !ok(r)) return false;
     const Vec3 a = grid.omega.row(p).transpose();
     const Vec3 n = (Vec3(grid.omega.row(q).transpose()) - a).cross(Vec3(grid.omega.row(r).transpose()) - a);
-    if (n.norm() > 1e-20) faces.emplace_back(p, q, r);
+    return n.norm() > 1e-20;
   };
-  for (int i = 0; i + 1 < rows; ++i)
-    for (int j = 0; j + 1 < cols; ++j) {
-      const int v00 = i * cols + j, v01 = v00 + 1, v10 = v00 + cols, v11 = v10 + 1;
-      add(v00, v10, v11);
-      add(v00, v11, v01);
+  // Triangles per row of cells, and rows of cells.
+  const auto strip = static_cast<std::size_t>(2 * std::max(0, cols - 1));
+  const auto cell_rows = static_cast<std::size_t>(std::max(0, rows - 1));
+  std::vector<char> made(cell_rows * strip);
+  std::vector<Eigen::Index> first(cell_rows + 1, 0);  // row i's faces from first[i]
+  parallel_for(0, cell_rows, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i) {
+      Eigen::Index count = 0;
+      const int row = static_cast<int>(i) * cols;
+      for (int j = 0; j + 1 < cols; ++j) {
+        const int v00 = row + j, v01 = v00 + 1, v10 = v00 + cols, v11 = v10 + 1;
+        char* m = &made[i * strip + 2 * static_cast<std::size_t>(j)];
+        m[0] = is_face(v00, v10, v11), m[1] = is_face(v00, v11, v01);
+        count += m[0] + m[1];
+      }
+      first[i + 1] = count;
     }
+  }, 8);
+  for (std::size_t i = 0; i < cell_rows; ++i) first[i + 1] += first[i];
   Mesh m;
   m.V = grid.omega;
-  m.F.resize(static_cast<Eigen::Index>(faces.size()), 3);
-  for (std::size_t f = 0; f < faces.size(); ++f) m.F.row(static_cast<Eigen::Index>(f)) = faces[f].transpose();
+  m.F.resize(first[cell_rows], 3);
+  parallel_for(0, cell_rows, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i) {
+      Eigen::Index f = first[i];
+      const int row = static_cast<int>(i) * cols;
+      for (int j = 0; j + 1 < cols; ++j) {
+        const int v00 = row + j, v01 = v00 + 1, v10 = v00 + cols, v11 = v10 + 1;
+        const char* made_here = &made[i * strip + 2 * static_cast<std::size_t>(j)];
+        if (made_here[0]) m.F.row(f++) << v00, v10, v11;
+        if (made_here[1]) m.F.row(f++) << v00, v11, v01;
+      }
+    }
+  }, 8);
   return m;
 }
 
@@ -235,26 +260,56 @@ double omega_error_at(const SurfaceIndex& index, const Motion& motion, const Cut
 // `count` samples of largest |e| (over Φ, on rows where the axis sweeps).
 double refined_max(const SurfaceIndex& index, const Motion& motion, const Cutter& cutter, const ErrorGrid& grid,
                    int count) {
-  std::vector<std::pair<double, std::size_t>> top;
-  for (std::size_t k = 0; k < grid.omega_interior.size(); ++k)
-    if (grid.omega_interior[k] && (grid.sweeps.empty() || grid.sweeps[k / static_cast<std::size_t>(grid.cols)]))
-      top.emplace_back(std::abs(grid.error(static_cast<Eigen::Index>(k))), k);
-  const std::size_t n = std::min<std::size_t>(top.size(), static_cast<std::size_t>(count));
-  std::partial_sort(top.begin(), top.begin() + static_cast<std::ptrdiff_t>(n), top.end(),
-                    [](const auto& a, const auto& b) { return a.first > b.first || (a.first == b.first && a.second < b.second); });
-  double best = 0.0;
+  // The `count` largest, the first of equals by sample: each block of samples' own, then
+  // the largest of those. The order is total, so they are the ones one sort of all finds.
+  using Ranked = std::pair<double, std::size_t>;
+  const auto before = [](const Ranked& a, const Ranked& b) {
+    return a.first > b.first || (a.first == b.first && a.second < b.second);
+  };
+  const auto largest = [&](std::vector<Ranked>& v) {
+    const auto m = std::min<std::size_t>(v.size(), static_cast<std::size_t>(std::max(0, count)));
+    std::partial_sort(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(m), v.end(), before);
+    v.resize(m);
+  };
+  constexpr std::size_t kBlock = 8192;
+  const std::size_t samples = grid.omega_interior.size();
+  std::vector<std::vector<Ranked>> tops((samples + kBlock - 1) / kBlock);
+  parallel_for(0, tops.size(), [&](std::size_t b0, std::size_t b1) {
+    for (std::size_t b = b0; b < b1; ++b) {
+      for (std::size_t k = b * kBlock; k < std::min(samples, (b + 1) * kBlock); ++k)
+        if (grid.omega_interior[k] &&
+            (grid.sweeps.empty() || grid.sweeps[k / static_cast<std::size_t>(grid.cols)]))
+          tops[b].emplace_back(std::abs(grid.error(static_cast<Eigen::Index>(k))), k);
+      largest(tops[b]);
+    }
+  }, 1);
+  std::vector<Ranked> top;
+  for (const std::vector<Ranked>& t : tops) top.insert(top.end(), t.begin(), t.end());
+  largest(top);
+  const std::size_t n = top.size();
+  // Each sample's neighbourhood on its own (25 queries), then the largest in sample order,
+  // the first of equals kept: the value one pass over them all finds.
   const double dt = 1.0 / (grid.rows - 1), ds = 1.0 / (grid.cols - 1);
-  for (std::size_t q = 0; q < n; ++q) {
-    const std::size_t k = top[q].second;
-    const int i = static_cast<int>(k / static_cast<std::size_t>(grid.cols)), j = static_cast<int>(k % static_cast<std::size_t>(grid.cols));
-    const Vec3 g = grid.directions.row(static_cast<Eigen::Index>(k)).transpose();
-    for (int a = -2; a <= 2; ++a)
-      for (int b = -2; b <= 2; ++b) {
-        const double t = std::clamp((i + 0.25 * a) * dt, 0.0, 1.0), s = std::clamp((j + 0.25 * b) * ds, 0.0, 1.0);
-        const double e = omega_error_at(index, motion, cutter, t, s, g, grid.faces[k]);
-        if (std::isfinite(e) && std::abs(e) > std::abs(best)) best = e;
-      }
-  }
+  std::vector<double> near_best(n, 0.0);
+  parallel_for(0, n, [&](std::size_t q0, std::size_t q1) {
+    for (std::size_t q = q0; q < q1; ++q) {
+      const std::size_t k = top[q].second;
+      const auto cols = static_cast<std::size_t>(grid.cols);
+      const int i = static_cast<int>(k / cols), j = static_cast<int>(k % cols);
+      const Vec3 g = grid.directions.row(static_cast<Eigen::Index>(k)).transpose();
+      double& best = near_best[q];
+      for (int a = -2; a <= 2; ++a)
+        for (int b = -2; b <= 2; ++b) {
+          const double t = std::clamp((i + 0.25 * a) * dt, 0.0, 1.0);
+          const double s = std::clamp((j + 0.25 * b) * ds, 0.0, 1.0);
+          const double e = omega_error_at(index, motion, cutter, t, s, g, grid.faces[k]);
+          if (std::isfinite(e) && std::abs(e) > std::abs(best)) best = e;
+        }
+    }
+  }, 1);
+  double best = 0.0;
+  for (const double e : near_best)
+    if (std::abs(e) > std::abs(best)) best = e;
   return best;
 }
 
@@ -270,47 +325,72 @@ constexpr double kUnderCosine = 0.8660254037844386;
 class OmegaSurface {
  public:
   OmegaSurface(const ErrorGrid& grid, double reach) : mesh_(envelope_mesh(grid, nullptr)), reach_(reach) {}
-  const Mesh& mesh() const { return mesh_; }
+  const Mesh& mesh() const { return index_ ? index_->mesh() : mesh_; }
   const SurfaceIndex& index() {
-    if (!index_) index_ = std::make_unique<SurfaceIndex>(SurfaceIndex::within_reach(mesh_, reach_));
+    // The index keeps the mesh: a copy of Ω's (a few MB on a fine grid) was a serial pass.
+    if (!index_)
+      index_ = std::make_unique<SurfaceIndex>(SurfaceIndex::within_reach(std::move(mesh_), reach_));
     return *index_;
   }
   // The faces whose three corners `keep` holds: the faces envelope_mesh(grid, &keep) has.
   std::vector<char> mask(const std::vector<char>& keep) const {
-    std::vector<char> m(static_cast<std::size_t>(mesh_.face_count()));
-    for (int f = 0; f < mesh_.face_count(); ++f)
-      m[static_cast<std::size_t>(f)] = keep[static_cast<std::size_t>(mesh_.F(f, 0))] &&
-                                       keep[static_cast<std::size_t>(mesh_.F(f, 1))] &&
-                                       keep[static_cast<std::size_t>(mesh_.F(f, 2))];
+    const Faces& F = mesh().F;
+    std::vector<char> m(static_cast<std::size_t>(F.rows()));
+    parallel_for(0, m.size(), [&](std::size_t begin, std::size_t end) {
+      for (std::size_t f = begin; f < end; ++f) {
+        const auto i = static_cast<Eigen::Index>(f);
+        m[f] = keep[static_cast<std::size_t>(F(i, 0))] && keep[static_cast<std::size_t>(F(i, 1))] &&
+               keep[static_cast<std::size_t>(F(i, 2))];
+      }
+    }, 8192);
     return m;
   }
 
  private:
-  Mesh mesh_;
+  Mesh mesh_;  // until the index takes it
   double reach_;
   std::unique_ptr<SurfaceIndex> index_;
 };
 
 // Φ's vertices inside the bounding box of Ω's faces (those `mask` marks) grown by `margin`
-// (the only ones within `margin` of them). Empty when no face is marked.
+// (the only ones within `margin` of them), in increasing order. Empty when no face is marked.
+// Both passes in blocks on every thread, combined in block order.
 std::vector<int> vertices_near(const Mesh& phi, const Mesh& omega, const std::vector<char>& mask, double margin) {
-  Vec3 lo = Vec3::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
-  bool any = false;
-  for (Eigen::Index f = 0; f < omega.F.rows(); ++f) {
-    if (!mask[static_cast<std::size_t>(f)]) continue;
-    any = true;
-    for (int c = 0; c < 3; ++c) {
-      lo = lo.cwiseMin(Vec3(omega.V.row(omega.F(f, c)).transpose()));
-      hi = hi.cwiseMax(Vec3(omega.V.row(omega.F(f, c)).transpose()));
+  constexpr std::size_t kBlock = 8192;
+  const auto nf = static_cast<std::size_t>(omega.F.rows());
+  const std::size_t face_blocks = (nf + kBlock - 1) / kBlock;
+  const Vec3 none = Vec3::Constant(std::numeric_limits<double>::infinity());
+  std::vector<Vec3> block_lo(face_blocks, none), block_hi(face_blocks, -none);
+  parallel_for(0, face_blocks, [&](std::size_t b0, std::size_t b1) {
+    for (std::size_t b = b0; b < b1; ++b) {
+      Vec3 lo = none, hi = -none;
+      for (std::size_t f = b * kBlock; f < std::min(nf, (b + 1) * kBlock); ++f) {
+        if (!mask[f]) continue;
+        for (int c = 0; c < 3; ++c) {
+          const Vec3 p = omega.V.row(omega.F(static_cast<Eigen::Index>(f), c)).transpose();
+          lo = lo.cwiseMin(p), hi = hi.cwiseMax(p);
+        }
+      }
+      block_lo[b] = lo, block_hi[b] = hi;
     }
-  }
+  }, 1);
+  Vec3 lo = none, hi = -none;
+  for (std::size_t b = 0; b < face_blocks; ++b)
+    lo = lo.cwiseMin(block_lo[b]), hi = hi.cwiseMax(block_hi[b]);
   std::vector<int> near;
-  if (!any) return near;
+  if (!(lo.array() <= hi.array()).all()) return near;  // no face marked
   lo.array() -= margin, hi.array() += margin;
-  for (int v = 0; v < phi.vertex_count(); ++v) {
-    const Vec3 p = phi.V.row(v).transpose();
-    if ((p.array() >= lo.array()).all() && (p.array() <= hi.array()).all()) near.push_back(v);
-  }
+  const auto nv = static_cast<std::size_t>(phi.vertex_count());
+  std::vector<std::vector<int>> found((nv + kBlock - 1) / kBlock);
+  parallel_for(0, found.size(), [&](std::size_t b0, std::size_t b1) {
+    for (std::size_t b = b0; b < b1; ++b)
+      for (std::size_t v = b * kBlock; v < std::min(nv, (b + 1) * kBlock); ++v) {
+        const Vec3 p = phi.V.row(static_cast<Eigen::Index>(v)).transpose();
+        if ((p.array() >= lo.array()).all() && (p.array() <= hi.array()).all())
+          found[b].push_back(static_cast<int>(v));
+      }
+  }, 1);
+  for (const std::vector<int>& f : found) near.insert(near.end(), f.begin(), f.end());
   return near;
 }
 

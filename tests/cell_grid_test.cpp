@@ -1,8 +1,11 @@
 #include "kernels/cell_grid.h"
 
+#include "kernels/parallel.h"
+
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <random>
 #include <vector>
 
@@ -47,6 +50,44 @@ TEST(CellGrid, ListsEveryBoxHoldingThePoint) {
     }
   }
   EXPECT_GT(held, 3000);
+}
+
+// Built in chunks of items on two threads, the grid is the one a single pass builds: the same
+// cells and table, and every point's list the same, in the same order. Boxes along a winding
+// strip, as a mesh's faces come, so that the chunks share many cells, among scattered ones.
+TEST(CellGrid, SameGridWhateverTheThreadCount) {
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> u01(0.0, 1.0);
+  const int n = 40000;  // several chunks
+  std::vector<Vec3> lo(n), hi(n);
+  for (int i = 0; i < n; ++i) {
+    const double t = 0.002 * i;
+    const Vec3 strip(30.0 + 25.0 * std::cos(t), 30.0 + 25.0 * std::sin(3.0 * t), 5.0 + u01(rng));
+    const Vec3 c = i % 13 == 0 ? Vec3(60.0 * u01(rng), 60.0 * u01(rng), 10.0 * u01(rng)) : strip;
+    const double size = i % 211 == 0 ? 20.0 * u01(rng) : 0.3 + 0.5 * u01(rng);
+    lo[i] = c - 0.5 * size * Vec3(u01(rng), u01(rng), u01(rng));
+    hi[i] = c + 0.5 * size * Vec3(u01(rng), u01(rng), u01(rng));
+  }
+  const auto built = [&](int threads) {
+    const ThreadLimit limit(threads);
+    return CellGrid(lo, hi);
+  };
+  const CellGrid one = built(1), two = built(2);
+  ASSERT_GE(max_threads(), 1);
+  EXPECT_EQ(one.cells(), two.cells());
+  EXPECT_EQ(one.entries(), two.entries());
+  EXPECT_EQ(one.slots(), two.slots());
+  std::vector<Vec3> points;
+  for (int k = 0; k < 20000; ++k)
+    points.emplace_back(-5.0 + 70.0 * u01(rng), -5.0 + 70.0 * u01(rng), -1.0 + 12.0 * u01(rng));
+  for (int i = 0; i < n; i += 3) points.push_back(0.5 * (lo[i] + hi[i]));
+  std::size_t listed = 0;
+  for (const Vec3& p : points) {
+    const std::span<const std::int32_t> a = one.items_at(p), b = two.items_at(p);
+    ASSERT_TRUE(std::equal(a.begin(), a.end(), b.begin(), b.end()));
+    listed += a.size();
+  }
+  EXPECT_GT(listed, points.size());
 }
 
 TEST(CellGrid, EmptyAndDegenerate) {

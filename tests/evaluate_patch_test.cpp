@@ -12,6 +12,7 @@
 #include <cstdio>
 
 #include "kernels/bspline.h"
+#include "kernels/parallel.h"
 #include "solver/grow_patch.h"
 #include "test_parts.h"
 
@@ -114,6 +115,35 @@ TEST(EvaluatePatch, TrueCutterOnTrueMotionIsWithinTheChordError) {
   EXPECT_NEAR(gouging.error.max_gouge, 3.0 * eo.tolerance, part.chord_error);
   EXPECT_EQ(gouging.coverage_fraction, 0.0);
   EXPECT_TRUE(gouging.covered_vertices.empty());
+}
+
+// The same patch whatever the thread count: Ω's mesh and its index, the vertices near it, the
+// largest errors refined and the coverage are each made in blocks on every thread, combined
+// in block order. A grid of 400 × 120 samples: several blocks of each.
+TEST(EvaluatePatch, SameAnswerWhateverTheThreadCount) {
+  const SynthResult part = testing::paper_part(PaperTool::cone, 121, 31);
+  const SurfaceIndex index(part.mesh);
+  EvaluateOptions eo;
+  eo.tolerance = 1e-4 * index.diagonal();
+  eo.rows = 400, eo.cols = 120;
+  eo.vertex_side = true;
+  eo.refine_max = 20;
+  const auto evaluated = [&](int threads) {
+    const ThreadLimit limit(threads);
+    const Cutter cone = cone_from_end_radii(kPaperToolLength, 4.0, 7.0);
+    return evaluate_patch(index, testing::true_motion(40), cone, eo);
+  };
+  const Patch one = evaluated(1), two = evaluated(2);
+  EXPECT_GT(one.envelope.F.rows(), 2 * 8192);
+  EXPECT_GT(one.covered_vertices.size(), 1000u);
+  EXPECT_GT(one.error.max, 0.0);
+  EXPECT_EQ(one.error.max, two.error.max);
+  EXPECT_EQ(one.error.max_gouge, two.error.max_gouge);
+  EXPECT_EQ(one.error.rms, two.error.rms);
+  EXPECT_EQ(one.covered_vertices, two.covered_vertices);
+  EXPECT_EQ(one.covered_area, two.covered_area);
+  EXPECT_TRUE(one.envelope.F == two.envelope.F);
+  EXPECT_TRUE(one.envelope.V == two.envelope.V);
 }
 
 // ---------------------------------------------------------------------------------------------
