@@ -150,7 +150,7 @@ CellGrid::CellGrid(std::span<const Vec3> lo, std::span<const Vec3> hi) {
   // grid is the same whatever the number of chunks. Each chunk then places its items after
   // those of the chunks before it, in every cell.
   const auto total = static_cast<std::size_t>(total_pairs);  // exact: at most 16 per item here
-  constexpr std::size_t kChunkItems = 8192;  // a smaller grid is one chunk, built in one pass
+  constexpr std::size_t kChunkItems = 8192;  // items a chunk at least: fewer are one pass
   const auto threads = static_cast<std::size_t>(std::max(1, max_threads()));
   const std::size_t chunk_count = std::clamp<std::size_t>(n / kChunkItems, 1, threads);
   std::vector<Chunk> chunks(chunk_count);
