@@ -42,8 +42,8 @@ void CellGrid::range_of(const Vec3& lo, const Vec3& hi, std::int64_t* r) const {
 }
 
 double CellGrid::pairs(std::span<const Vec3> lo, std::span<const Vec3> hi) const {
-  // Per block, then summed in block order: each is a whole number of pairs, so the sum is
-  // exact and the same whatever the thread count.
+  // Per block of items, then summed in block order: the same sum whatever the thread count
+  // (and exact where it decides anything, at most 16 pairs an item).
   const std::size_t n = lo.size(), block = 4096, blocks = (n + block - 1) / block;
   std::vector<double> part(blocks, 0.0);
   parallel_for(0, blocks, [&](std::size_t b0, std::size_t b1) {

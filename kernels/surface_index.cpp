@@ -710,9 +710,11 @@ SurfaceIndex::SurfaceIndex(Mesh mesh_given, QueryEngine engine, double reach)
   const Mesh& mesh = m.mesh;
   const int nf = mesh.face_count();
   if (m.engine == QueryEngine::kCells) {
-    // An index for a few bounded queries (Ω's): its two builds are mostly serial, the faces'
-    // adjacency after the edges' sort and the cell table, and independent, so they run side
-    // by side. Each writes its own members; the result does not depend on which ends first.
+    // An index for a few bounded queries (Ω's): its two builds are independent, so they run
+    // side by side: the faces' adjacency after the edges' sort (mostly serial), and the faces'
+    // boxes and their cell table (both on every thread: kernels/cell_grid.h), which is two
+    // thirds of the work. Each writes its own members; the result does not depend on which
+    // ends first.
     // Queries read the corners from the mesh: a table of them (72 bytes a face) was fresh
     // memory whose first touch, on Ω's 104k faces of the 13k cone part, cost 2k page faults.
     const double scale = m.set_frame();
