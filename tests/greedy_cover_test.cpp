@@ -28,6 +28,15 @@ std::vector<int> range_of(int first, int last) {  // [first, last]
   return v;
 }
 
+// A patch covering the run of `1 + rng() % max_len` vertices from a random one, cyclically
+// over V, with an error of 0.01 × (rng() % error_levels): the random pools' entries.
+Patch random_run(std::mt19937& rng, int V, int max_len, int error_levels) {
+  std::vector<int> verts;
+  const int first = static_cast<int>(rng() % V), len = 1 + static_cast<int>(rng() % max_len);
+  for (int i = 0; i < len; ++i) verts.push_back((first + i) % V);
+  return make_patch(verts, 0.01 * static_cast<double>(rng() % error_levels));
+}
+
 double union_area(const std::vector<Patch>& pool, const std::vector<int>& picks, const VecX& area) {
   std::vector<char> seen(static_cast<std::size_t>(area.size()), 0);
   double sum = 0.0;
@@ -231,12 +240,7 @@ TEST(GreedyCover, RandomPoolsKeepEveryInvariant) {
     VecX area(V);
     for (int v = 0; v < V; ++v) area(v) = uni(rng);
     std::vector<Patch> pool;
-    for (int k = 0; k < P; ++k) {
-      std::vector<int> verts;
-      const int first = static_cast<int>(rng() % V), len = 1 + static_cast<int>(rng() % (V / 2));
-      for (int i = 0; i < len; ++i) verts.push_back((first + i) % V);
-      pool.push_back(make_patch(verts, 0.01 * static_cast<double>(rng() % 4)));
-    }
+    for (int k = 0; k < P; ++k) pool.push_back(random_run(rng, V, V / 2, 4));
     CoverOptions o;
     o.coverage_target = 0.9, o.max_patches = 6, o.min_gain = 0.02;
     Cover c = empty_cover(area);
@@ -395,12 +399,7 @@ TEST(GreedyCover, SameCoverWhateverTheThreadCount) {
     VecX area(V);
     for (int v = 0; v < V; ++v) area(v) = 0.5 * (1 + static_cast<int>(rng() % 3));
     std::vector<Patch> pool;
-    for (int k = 0; k < P; ++k) {
-      std::vector<int> verts;
-      const int first = static_cast<int>(rng() % V), len = 1 + static_cast<int>(rng() % (V / 4));
-      for (int i = 0; i < len; ++i) verts.push_back((first + i) % V);
-      pool.push_back(make_patch(verts, 0.01 * static_cast<double>(rng() % 2)));
-    }
+    for (int k = 0; k < P; ++k) pool.push_back(random_run(rng, V, V / 4, 2));
     if (trial % 3 == 0) pool.push_back(pool[rng() % pool.size()]);  // an exact duplicate
     CoverOptions o;
     o.coverage_target = 0.99, o.max_patches = 4 + trial % 6, o.min_gain = 0.001;
