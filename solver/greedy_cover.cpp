@@ -66,43 +66,58 @@ void improve_cover(const std::vector<Patch>& pool, const VecX& area, int max_swa
   if (c->picks.empty()) return;
   const std::size_t V = static_cast<std::size_t>(area.size());
   std::vector<int> count(V, 0);  // picked patches covering each vertex
+  std::vector<int> sole(V, -1);  // where count is 1: the index into `picks` of that patch
   std::vector<char> picked(pool.size(), 0);
   for (int k : c->picks) {
     picked[static_cast<std::size_t>(k)] = 1;
     for (int v : pool[static_cast<std::size_t>(k)].covered_vertices) ++count[static_cast<std::size_t>(v)];
   }
   std::vector<int> picks = c->picks;
-  struct Swap {
-    double delta;
-    int in = -1;
-  };
+  const std::size_t P = picks.size();
+  // A swap of pick i (out) for entry j (in) gains the area of j's vertices that no pick
+  // covers, or that i alone covers, and loses the area that i alone covers: one pass over j's
+  // vertices gives its gain for every i at once (what no pick covers adds to each i's sum,
+  // what pick i alone covers to i's), where taking each i out on its own would pass over
+  // every entry once per pick. Each sum gets the same terms in the same order (the order of
+  // j's vertices) as summing j's gain with i taken out: the same values, bit for bit. A
+  // patch lists each covered vertex once (evaluate_patch).
+  std::vector<double> loss(P), gain(pool.size() * P);  // gain: row j, column i
   for (int swap = 0; swap < max_swaps; ++swap) {
     const double least = 1e-9 * c->total_area;  // a swap must gain more than rounding
-    // Per pick taken out, the best patch to put in (the first at the largest gain over
-    // `least`), each on its own copy of the counts; then the first pick at the largest.
-    std::vector<Swap> best(picks.size(), Swap{least});
-    parallel_for(0, picks.size(), [&](std::size_t b, std::size_t e) {
-      std::vector<int> own = count;
-      for (std::size_t i = b; i < e; ++i) {
-        const Patch& out = pool[static_cast<std::size_t>(picks[i])];
-        double loss = 0.0;
-        for (int v : out.covered_vertices) {
-          if (own[static_cast<std::size_t>(v)] == 1) loss += area(v);
-          --own[static_cast<std::size_t>(v)];
+    for (std::size_t i = 0; i < P; ++i)
+      for (int v : pool[static_cast<std::size_t>(picks[i])].covered_vertices)
+        sole[static_cast<std::size_t>(v)] = static_cast<int>(i);
+    for (std::size_t i = 0; i < P; ++i)
+      loss[i] = area_where(pool[static_cast<std::size_t>(picks[i])].covered_vertices, area,
+                           [&](std::size_t v) { return count[v] == 1; });
+    parallel_for(0, pool.size(), [&](std::size_t b, std::size_t e) {
+      for (std::size_t j = b; j < e; ++j) {
+        if (picked[j]) continue;
+        double* sum = &gain[j * P];
+        std::fill(sum, sum + P, 0.0);
+        for (int v : pool[j].covered_vertices) {
+          const int n = count[static_cast<std::size_t>(v)];
+          const double a = area(v);
+          if (n == 0)
+            for (std::size_t i = 0; i < P; ++i) sum[i] += a;
+          else if (n == 1)
+            sum[sole[static_cast<std::size_t>(v)]] += a;
         }
-        for (std::size_t j = 0; j < pool.size(); ++j) {
-          if (picked[j]) continue;
-          const double gain = area_where(pool[j].covered_vertices, area, [&](std::size_t v) { return own[v] == 0; });
-          if (gain - loss > best[i].delta) best[i] = {gain - loss, static_cast<int>(j)};
-        }
-        for (int v : out.covered_vertices) ++own[static_cast<std::size_t>(v)];
       }
-    }, 1);
+    }, kGrain);
+    // Per pick taken out, the first entry at the largest gain over `least`; then the first
+    // pick at the largest.
     double best_delta = least;
     int best_out = -1, best_in = -1;
-    for (std::size_t i = 0; i < picks.size(); ++i)
-      if (best[i].in >= 0 && best[i].delta > best_delta)
-        best_delta = best[i].delta, best_out = static_cast<int>(i), best_in = best[i].in;
+    for (std::size_t i = 0; i < P; ++i) {
+      double delta = least;
+      int in = -1;
+      for (std::size_t j = 0; j < pool.size(); ++j) {
+        const double d = gain[j * P + i] - loss[i];
+        if (!picked[j] && d > delta) delta = d, in = static_cast<int>(j);
+      }
+      if (in >= 0 && delta > best_delta) best_delta = delta, best_out = static_cast<int>(i), best_in = in;
+    }
     if (best_out < 0) break;
     for (int v : pool[static_cast<std::size_t>(picks[best_out])].covered_vertices) --count[static_cast<std::size_t>(v)];
     for (int v : pool[static_cast<std::size_t>(best_in)].covered_vertices) ++count[static_cast<std::size_t>(v)];
