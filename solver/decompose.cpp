@@ -7,6 +7,7 @@
 #include <cstdio>
 #include <memory>
 #include <mutex>
+#include <optional>
 
 #include "kernels/parallel.h"
 #include "solver/candidate_lines.h"
@@ -167,6 +168,15 @@ struct SeedCache {
   }
 };
 
+// The seeding of a round (SeedOptions::allowed aside): seed_spacing apart over all of Φ in
+// round 0, half that over what is still uncovered after.
+SeedOptions seed_options(const DecomposeOptions& o, double diagonal, int round) {
+  SeedOptions so;
+  so.spacing = (round == 0 ? 1.0 : 0.5) * o.seed_spacing * diagonal;
+  so.max_seeds = o.max_seeds;
+  return so;
+}
+
 // The stages' options, derived once from the decomposition's.
 struct StageOptions {
   CandidateLineOptions lines;  // step 2
@@ -262,8 +272,10 @@ struct RoundLines {
 class Decomposition {
  public:
   // `work` is Φ or its smoothed copy (then `given` is Φ); lengths scale with Φ's `diagonal`.
+  // `tiler` seeds `work`'s mesh; `first_seeds`, where given, are its seeds of round 0.
   Decomposition(const SurfaceIndex& work, const SurfaceIndex* given, double diagonal, const DecomposeOptions& o,
-                const std::vector<CutterKind>& kinds, const ProgressFn& say, DecomposeResult& out)
+                const std::vector<CutterKind>& kinds, const ProgressFn& say, DecomposeResult& out,
+                std::unique_ptr<SeedTiler> tiler, std::optional<std::vector<Seed>> first_seeds)
       : work_(work),
         mesh_(work.mesh()),
         o_(o),
@@ -273,7 +285,8 @@ class Decomposition {
         out_(out),
         area_(vertex_areas(mesh_)),
         cover_(empty_cover(area_)),
-        tiler_(mesh_) {
+        tiler_(std::move(tiler)),
+        first_seeds_(std::move(first_seeds)) {
     out_.total_area = cover_.total_area;
   }
 
@@ -312,7 +325,8 @@ class Decomposition {
   DecomposeResult& out_;
   const VecX area_;
   Cover cover_;
-  SeedTiler tiler_;               // Φ's scale and vertex grids, kept over the rounds
+  std::unique_ptr<SeedTiler> tiler_;  // Φ's scale and vertex grids, kept over the rounds
+  std::optional<std::vector<Seed>> first_seeds_;  // round 0's, until it takes them
 
   std::vector<Patch> pool_;       // every valid candidate patch, in a deterministic order
   std::vector<char> finished_;    // per pool entry: replaced by its finished patch
@@ -379,14 +393,18 @@ bool Decomposition::rounds() {
 // 1. Seeds: over all of Φ first, then over what is still uncovered.
 std::vector<Seed> Decomposition::seeds(int round) {
   const auto t0 = Clock::now();
-  SeedOptions so;
-  so.spacing = (round == 0 ? 1.0 : 0.5) * o_.seed_spacing * diagonal_;
-  so.max_seeds = o_.max_seeds;
-  if (round > 0) {
-    so.allowed.assign(static_cast<std::size_t>(mesh_.vertex_count()), 0);
-    for (int v = 0; v < mesh_.vertex_count(); ++v) so.allowed[v] = cover_.vertex_patch[v] < 0;
+  std::vector<Seed> seeds;
+  if (round == 0 && first_seeds_) {
+    seeds = std::move(*first_seeds_);
+  } else {
+    SeedOptions so = seed_options(o_, diagonal_, round);
+    if (round > 0) {
+      so.allowed.assign(static_cast<std::size_t>(mesh_.vertex_count()), 0);
+      for (int v = 0; v < mesh_.vertex_count(); ++v) so.allowed[v] = cover_.vertex_patch[v] < 0;
+    }
+    seeds = (*tiler_)(so);
   }
-  std::vector<Seed> seeds = tiler_(so);
+  first_seeds_.reset();
   out_.times.seeds += since(t0);
   out_.seeds += static_cast<int>(seeds.size());
   return seeds;
@@ -695,17 +713,30 @@ DecomposeResult decompose(const SurfaceIndex& index, const DecomposeOptions& o, 
   };
   DecomposeResult out;
   // A noisy Φ (a scan): the solver works on a smoothed copy and reports against Φ as given.
+  // Beside the noise estimate, the first round's seeds over Φ as given, which the rounds
+  // start from unless Φ is smoothed: the seeding is a millisecond of mostly serial passes
+  // (Rotor 67's faces), done on the other thread while the estimate's threads are busy.
   const auto t_noise = Clock::now();
-  out.noise = estimate_noise(index.mesh());
+  std::unique_ptr<SeedTiler> tiler;
+  std::optional<std::vector<Seed>> first_seeds;
+  run_beside(
+      [&] {
+        tiler = std::make_unique<SeedTiler>(index.mesh());
+        first_seeds = (*tiler)(seed_options(o, index.diagonal(), 0));
+      },
+      [&] { out.noise = estimate_noise(index.mesh()); });
   std::unique_ptr<SurfaceIndex> smoothed;
   if (out.noise.sigma > o.noise_fraction * o.tolerance) {
     smoothed = std::make_unique<SurfaceIndex>(smooth_surface(index.mesh(), o.smoothing_passes, o.smoothing_rings));
     out.smoothed = true;
     say("the surface is noisy (sigma " + std::to_string(out.noise.sigma) + " mm): fitting on a smoothed copy");
+    tiler = std::make_unique<SeedTiler>(smoothed->mesh());
+    first_seeds.reset();
   }
   const SurfaceIndex& work = smoothed ? *smoothed : index;
   out.times.seeds += since(t_noise);
-  Decomposition d(work, smoothed ? &index : nullptr, index.diagonal(), o, by_generality(o.kinds), say, out);
+  Decomposition d(work, smoothed ? &index : nullptr, index.diagonal(), o, by_generality(o.kinds), say, out,
+                  std::move(tiler), std::move(first_seeds));
 
   // Rounds (steps 1-4), then the chosen patches with their simplest cutter kind, evaluated
   // finely and covered again in greedy order (step 5: the fine grid sees a little more or less
