@@ -24,7 +24,12 @@
 #include <tbb/task_scheduler_observer.h>
 #endif
 
+#include <atomic>
+#include <exception>
+#include <mutex>
 #include <optional>
+#include <thread>
+#include <utility>
 
 namespace flank {
 
@@ -49,6 +54,90 @@ std::optional<bool> run_without_offer(const std::function<void()>& maybe, const 
 
 OffersAlwaysTaken::OffersAlwaysTaken() { ++g_offers_always_taken; }
 OffersAlwaysTaken::~OffersAlwaysTaken() { --g_offers_always_taken; }
+
+namespace {
+// What a parallel loop runs on the calling thread at once: nothing, or a single chunk. True
+// when that was the whole loop; a grain of 0 becomes 1.
+bool ran_here(std::size_t begin, std::size_t end, const std::function<void(std::size_t, std::size_t)>& body,
+              std::size_t& grain) {
+  if (grain == 0) grain = 1;
+  if (end <= begin) return true;
+  if (end - begin > grain) return false;
+  body(begin, end);
+  return true;
+}
+
+void spin_pause() {
+#if defined(__x86_64__) || defined(__i386__)
+  __builtin_ia32_pause();
+#else
+  std::this_thread::yield();
+#endif
+}
+}  // namespace
+
+// The crew's state. The step under way lives on the caller's stack for the length of its
+// Crew::parallel_for, so a helper announces itself (`inside`) before it reads `step`, and
+// the caller withdraws the step (null) before it waits for `inside` to fall to 0: with both
+// sequentially consistent, either the caller sees the helper inside or the helper sees no
+// step, and no helper touches a step that has returned.
+struct Crew::State {
+  struct Step {
+    const std::function<void(std::size_t, std::size_t)>* body = nullptr;
+    std::size_t begin = 0, end = 0, grain = 1, chunks = 0;
+    std::atomic<std::size_t> next{0};  // the next chunk to take
+    std::atomic<std::size_t> done{0};  // chunks run
+  };
+  std::atomic<Step*> step{nullptr};
+  std::atomic<int> inside{0};     // helpers that may be reading `step`
+  std::atomic<bool> over{false};  // the stage has returned: helpers leave
+  std::mutex mutex;
+  std::exception_ptr failed;  // the first exception a chunk threw, under `mutex`
+
+  void run_chunks(Step& st) {
+    for (std::size_t c = st.next++; c < st.chunks; c = st.next++) {
+      try {
+        (*st.body)(st.begin + c * st.grain, std::min(st.end, st.begin + (c + 1) * st.grain));
+      } catch (...) {
+        const std::lock_guard lock(mutex);
+        if (!failed) failed = std::current_exception();
+      }
+      st.done.fetch_add(1, std::memory_order_release);
+    }
+  }
+
+  // A helper's life: the chunks of every step it sees, until the stage is over.
+  void help() {
+    while (!over.load(std::memory_order_acquire)) {
+      if (step.load(std::memory_order_relaxed) == nullptr) {
+        spin_pause();
+        continue;
+      }
+      ++inside;
+      if (Step* st = step.load()) run_chunks(*st);
+      --inside;
+    }
+  }
+};
+
+void Crew::parallel_for(std::size_t begin, std::size_t end,
+                        const std::function<void(std::size_t, std::size_t)>& body, std::size_t grain) {
+  if (ran_here(begin, end, body, grain)) return;
+  State::Step st;
+  st.body = &body, st.begin = begin, st.end = end, st.grain = grain;
+  st.chunks = (end - begin + grain - 1) / grain;
+  state_->step.store(&st);
+  state_->run_chunks(st);
+  while (st.done.load(std::memory_order_acquire) < st.chunks) spin_pause();
+  state_->step.store(nullptr);
+  while (state_->inside.load() != 0) spin_pause();
+  std::exception_ptr failed;
+  {
+    const std::lock_guard lock(state_->mutex);
+    failed = std::exchange(state_->failed, nullptr);
+  }
+  if (failed) std::rethrow_exception(failed);
+}
 
 #ifdef FLANK_TSAN_THREADS
 // The ThreadSanitizer build (scripts/test --tsan) runs the same chunks on plain std::threads.
@@ -144,6 +233,24 @@ bool run_if_idle(const std::function<void()>& maybe, const std::function<void()>
   return ran;
 }
 
+void with_crew(const std::function<void(Crew&)>& stage) {
+  Crew::State state;
+  Crew crew(&state);
+  std::vector<std::thread> helpers;
+  for (int h = 1; h < max_threads(); ++h) helpers.emplace_back([&] { state.help(); });
+  const auto finish = [&] {
+    state.over = true;
+    for (std::thread& t : helpers) t.join();
+  };
+  try {
+    stage(crew);
+  } catch (...) {
+    finish();
+    throw;
+  }
+  finish();
+}
+
 struct ThreadLimit::Impl {
   int previous = 0;
 };
@@ -172,12 +279,7 @@ void start_worker_threads() {}
 
 void parallel_for(std::size_t begin, std::size_t end,
                   const std::function<void(std::size_t, std::size_t)>& body, std::size_t grain) {
-  if (end <= begin) return;
-  if (grain == 0) grain = 1;
-  if (end - begin <= grain) {
-    body(begin, end);
-    return;
-  }
+  if (ran_here(begin, end, body, grain)) return;
   tbb::parallel_for(tbb::blocked_range<std::size_t>(begin, end, grain),
                     [&](const tbb::blocked_range<std::size_t>& r) { body(r.begin(), r.end()); });
 }
@@ -227,6 +329,22 @@ void parallel_invoke_each(std::size_t count, const std::function<void(std::size_
                     [&](const tbb::blocked_range<std::size_t>& r) {
                       for (std::size_t i = r.begin(); i < r.end(); ++i) task(i);
                     });
+}
+
+void with_crew(const std::function<void(Crew&)>& stage) {
+  Crew::State state;
+  Crew crew(&state);
+  tbb::task_group group;  // a helper not taken up by the end runs here, in wait(), and leaves
+  for (int h = 1; h < max_threads(); ++h) group.run([&] { state.help(); });
+  try {
+    stage(crew);
+  } catch (...) {
+    state.over = true;
+    group.wait();
+    throw;
+  }
+  state.over = true;
+  group.wait();
 }
 
 struct ThreadLimit::Impl {

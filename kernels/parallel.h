@@ -47,6 +47,34 @@ class OffersAlwaysTaken {
   OffersAlwaysTaken& operator=(const OffersAlwaysTaken&) = delete;
 };
 
+// A stage made of many short parallel steps with serial work between them (the cover's picks
+// and swaps: some tens of microseconds each), where a fork and join per step would cost as
+// much as the step: an idle thread takes some 35-90 µs to wake on the machines here
+// (bench/fork_join_benchmark.cpp). with_crew runs `stage` on the calling thread and wakes the
+// other threads once; between the stage's steps they wait spinning, not sleeping, and each
+// Crew::parallel_for runs on every thread that is there. A thread that is not free when the
+// stage starts joins later, or never: the caller then runs every chunk itself. Each chunk
+// runs once, whoever runs it, so results written per index are the same whatever the
+// thread count. Inside `stage`, parallel steps go through the crew, not flank::parallel_for
+// (the crew's other threads would not take part). Returns when `stage` has, rethrowing what
+// it or a chunk threw (the first, where several did).
+class Crew {
+ public:
+  // As flank::parallel_for: body(b, e) over chunks of `grain` of [begin, end), returning
+  // when every chunk has run.
+  void parallel_for(std::size_t begin, std::size_t end,
+                    const std::function<void(std::size_t, std::size_t)>& body, std::size_t grain = 64);
+
+  struct State;
+
+ private:
+  friend void with_crew(const std::function<void(Crew&)>& stage);
+  explicit Crew(State* state) : state_(state) {}
+  State* state_;
+};
+
+void with_crew(const std::function<void(Crew&)>& stage);
+
 // A fixed number of elements, default-initialised: for elements without a constructor that
 // writes (Eigen vectors, floats), nothing is written until the code that fills them does.
 // A std::vector of n zeroes its memory on the calling thread, so the first touch of every

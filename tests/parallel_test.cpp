@@ -197,5 +197,54 @@ TEST(Parallel, RunIfIdleRunsTheOfferOnlyBesideHere) {
                std::runtime_error);
 }
 
+// with_crew: over many steps with serial work between them, every chunk of every step runs
+// once, at 1 and 2 threads; at 2 the other thread takes part (two chunks that wait for each
+// other run on two threads). What a chunk or the stage throws reaches the caller.
+TEST(Parallel, CrewRunsEveryChunkOnceAndTheOtherThreadTakesPart) {
+  const auto size_of = [](int step) { return 1 + static_cast<std::size_t>(step) * 5 % 1000; };
+  for (const int threads : {1, 2}) {
+    const ThreadLimit limit(threads);
+    std::vector<int> runs(1000, 0);
+    with_crew([&](Crew& crew) {
+      for (int step = 0; step < 200; ++step) {
+        crew.parallel_for(0, size_of(step), [&](std::size_t b, std::size_t e) {
+          for (std::size_t i = b; i < e; ++i) ++runs[i];
+        }, 3);
+      }
+    });
+    for (std::size_t i = 0; i < runs.size(); ++i) {
+      int want = 0;
+      for (int step = 0; step < 200; ++step) want += i < size_of(step);
+      ASSERT_EQ(runs[i], want) << "index " << i << ", " << threads << " threads";
+    }
+  }
+  {
+    const ThreadLimit limit(2);
+    if (max_threads() >= 2) {
+      std::atomic<int> started{0};
+      std::thread::id ran_on[2];
+      with_crew([&](Crew& crew) {
+        crew.parallel_for(0, 2, [&](std::size_t b, std::size_t) {
+          ran_on[b] = std::this_thread::get_id();
+          ++started;
+          const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+          while (started < 2 && std::chrono::steady_clock::now() < until) std::this_thread::yield();
+        }, 1);
+      });
+      EXPECT_NE(ran_on[0], ran_on[1]) << "the other thread took no chunk in 20 s";
+    }
+  }
+  for (const int threads : {1, 2}) {
+    const ThreadLimit limit(threads);
+    EXPECT_THROW(with_crew([](Crew& crew) {
+                   crew.parallel_for(0, 100, [](std::size_t b, std::size_t) {
+                     if (b == 40) throw std::runtime_error("chunk");
+                   }, 1);
+                 }),
+                 std::runtime_error);
+    EXPECT_THROW(with_crew([](Crew&) { throw std::invalid_argument("stage"); }), std::invalid_argument);
+  }
+}
+
 }  // namespace
 }  // namespace flank
