@@ -375,8 +375,7 @@ bool Decomposition::rounds() {
 
     // 4. Cover.
     const auto t0 = Clock::now();
-    greedy_cover(pool_, area_, s_.cover, &cover_);
-    improve_cover(pool_, area_, o.max_swaps, &cover_);
+    extend_cover(pool_, area_, s_.cover, o.max_swaps, &cover_);
     out_.times.cover += since(t0);
     out_.rounds = round + 1;
     say_("round " + std::to_string(round + 1) + ": " + std::to_string(cover_.picks.size()) + " patches cover " +
@@ -700,8 +699,7 @@ Cover Decomposition::kept_of(const std::vector<int>& picks) const {
 
 Cover Decomposition::cover_again() const {
   Cover again = empty_cover(area_);
-  greedy_cover(pool_, area_, s_.cover, &again);
-  improve_cover(pool_, area_, o_.max_swaps, &again);
+  extend_cover(pool_, area_, s_.cover, o_.max_swaps, &again);
   return again;
 }
 

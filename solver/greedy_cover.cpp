@@ -32,14 +32,20 @@ Cover empty_cover(const VecX& area) {
   return c;
 }
 
-void greedy_cover(const std::vector<Patch>& pool, const VecX& area, const CoverOptions& o, Cover* c) {
+namespace {
+// True when `c` has as many picks as it may, or covers the target.
+bool full(const Cover& c, const CoverOptions& o) {
+  return static_cast<int>(c.picks.size()) >= o.max_patches || c.covered_area >= o.coverage_target * c.total_area;
+}
+
+// greedy_cover's picks, with `crew` for the sums.
+void greedy_on(Crew& crew, const std::vector<Patch>& pool, const VecX& area, const CoverOptions& o, Cover* c) {
   c->used.resize(pool.size(), 0);
   std::vector<double> gains(pool.size(), 0.0);  // per pool entry, of this pick
   for (int picked = 0; o.max_picks <= 0 || picked < o.max_picks; ++picked) {
     const int id = static_cast<int>(c->picks.size());
-    if (id >= o.max_patches) break;
-    if (c->covered_area >= o.coverage_target * c->total_area) break;
-    parallel_for(0, pool.size(), [&](std::size_t b, std::size_t e) {
+    if (full(*c, o)) break;
+    crew.parallel_for(0, pool.size(), [&](std::size_t b, std::size_t e) {
       for (std::size_t k = b; k < e; ++k)
         if (!c->used[k])
           gains[k] = area_where(pool[k].covered_vertices, area, [&](std::size_t v) { return c->vertex_patch[v] < 0; });
@@ -62,8 +68,11 @@ void greedy_cover(const std::vector<Patch>& pool, const VecX& area, const CoverO
   }
 }
 
-void improve_cover(const std::vector<Patch>& pool, const VecX& area, int max_swaps, Cover* c) {
-  if (c->picks.empty()) return;
+
+Cover order_on(Crew& crew, const std::vector<Patch>& pool, const VecX& area, std::vector<int> picks);
+
+// improve_cover's swaps and rebuild, with `crew` for the sums.
+void improve_on(Crew& crew, const std::vector<Patch>& pool, const VecX& area, int max_swaps, Cover* c) {
   const std::size_t V = static_cast<std::size_t>(area.size());
   std::vector<int> count(V, 0);  // picked patches covering each vertex
   std::vector<int> sole(V, -1);  // where count is 1: the index into `picks` of that patch
@@ -84,13 +93,18 @@ void improve_cover(const std::vector<Patch>& pool, const VecX& area, int max_swa
   std::vector<double> loss(P), gain(pool.size() * P);  // gain: row j, column i
   for (int swap = 0; swap < max_swaps; ++swap) {
     const double least = 1e-9 * c->total_area;  // a swap must gain more than rounding
-    for (std::size_t i = 0; i < P; ++i)
-      for (int v : pool[static_cast<std::size_t>(picks[i])].covered_vertices)
-        sole[static_cast<std::size_t>(v)] = static_cast<int>(i);
-    for (std::size_t i = 0; i < P; ++i)
-      loss[i] = area_where(pool[static_cast<std::size_t>(picks[i])].covered_vertices, area,
-                           [&](std::size_t v) { return count[v] == 1; });
-    parallel_for(0, pool.size(), [&](std::size_t b, std::size_t e) {
+    // Per pick, what it alone covers: its loss, and those vertices marked as its own (a
+    // vertex covered once is one pick's only: no two tasks write it).
+    crew.parallel_for(0, P, [&](std::size_t b, std::size_t e) {
+      for (std::size_t i = b; i < e; ++i) {
+        double sum = 0.0;
+        for (int v : pool[static_cast<std::size_t>(picks[i])].covered_vertices)
+          if (count[static_cast<std::size_t>(v)] == 1)
+            sole[static_cast<std::size_t>(v)] = static_cast<int>(i), sum += area(v);
+        loss[i] = sum;
+      }
+    }, 1);
+    crew.parallel_for(0, pool.size(), [&](std::size_t b, std::size_t e) {
       for (std::size_t j = b; j < e; ++j) {
         if (picked[j]) continue;
         double* sum = &gain[j * P];
@@ -125,7 +139,27 @@ void improve_cover(const std::vector<Patch>& pool, const VecX& area, int max_swa
     picked[static_cast<std::size_t>(best_in)] = 1;
     picks[static_cast<std::size_t>(best_out)] = best_in;
   }
-  *c = order_cover(pool, area, picks);
+  *c = order_on(crew, pool, area, picks);
+}
+}  // namespace
+
+void greedy_cover(const std::vector<Patch>& pool, const VecX& area, const CoverOptions& o, Cover* c) {
+  c->used.resize(pool.size(), 0);
+  if (!full(*c, o)) with_crew([&](Crew& crew) { greedy_on(crew, pool, area, o, c); });
+}
+
+void improve_cover(const std::vector<Patch>& pool, const VecX& area, int max_swaps, Cover* c) {
+  if (!c->picks.empty()) with_crew([&](Crew& crew) { improve_on(crew, pool, area, max_swaps, c); });
+}
+
+void extend_cover(const std::vector<Patch>& pool, const VecX& area, const CoverOptions& o, int max_swaps,
+                  Cover* c) {
+  c->used.resize(pool.size(), 0);
+  if (full(*c, o) && c->picks.empty()) return;
+  with_crew([&](Crew& crew) {
+    if (!full(*c, o)) greedy_on(crew, pool, area, o, c);
+    if (!c->picks.empty()) improve_on(crew, pool, area, max_swaps, c);
+  });
 }
 
 namespace {
@@ -193,24 +227,30 @@ std::vector<int> elimination_order(const std::vector<Patch>& pool, const VecX& a
   std::reverse(eliminated.begin(), eliminated.end());
   return eliminated;
 }
-}  // namespace
 
-Cover order_cover(const std::vector<Patch>& pool, const VecX& area, std::vector<int> picks) {
+Cover order_on(Crew& crew, const std::vector<Patch>& pool, const VecX& area, std::vector<int> picks) {
   std::sort(picks.begin(), picks.end());
   // The two orders and their covers are independent: one task each. (Their steps, a dozen
   // sums each over a dozen picks, are too short to split: a fork per step cost more than
   // it saved.)
   Cover a, b;
-  parallel_invoke_each(2, [&](std::size_t task) {
+  crew.parallel_for(0, 2, [&](std::size_t task, std::size_t) {
     if (task == 0)
       a = cover_in_order(pool, area, greedy_order(pool, area, picks));
     else
       b = cover_in_order(pool, area, elimination_order(pool, area, picks));
-  });
+  }, 1);
   double sa = 0.0, sb = 0.0;
   for (double x : a.curve) sa += x;
   for (double x : b.curve) sb += x;
   return sb > sa * (1.0 + 1e-12) ? b : a;
+}
+}  // namespace
+
+Cover order_cover(const std::vector<Patch>& pool, const VecX& area, std::vector<int> picks) {
+  Cover out;
+  with_crew([&](Crew& crew) { out = order_on(crew, pool, area, std::move(picks)); });
+  return out;
 }
 
 std::vector<UncoveredRegion> uncovered_regions(const Mesh& mesh, const std::vector<int>& vertex_patch,

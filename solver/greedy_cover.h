@@ -45,6 +45,11 @@ void greedy_cover(const std::vector<Patch>& pool, const VecX& area, const CoverO
 // are then ordered by order_cover and the cover rebuilt. Deterministic.
 void improve_cover(const std::vector<Patch>& pool, const VecX& area, int max_swaps, Cover* cover);
 
+// greedy_cover, then improve_cover where the cover has picks: the same cover as the two calls,
+// with the threads woken once for both (kernels/parallel.h, with_crew).
+void extend_cover(const std::vector<Patch>& pool, const VecX& area, const CoverOptions& options, int max_swaps,
+                  Cover* cover);
+
 // The cover of exactly `picks` (pool indices), in the order that covers the most early on: the
 // greedy order (the largest gain first) or the reverse of backward elimination (dropping, from
 // the whole set, the pick that loses the least area, first dropped last), whichever covers more

@@ -389,9 +389,10 @@ TEST(ImproveCover, NeverLosesAreaAndEndsAtASwapLocalOptimum) {
 }
 
 // The cover's sums run in parallel, each into its own slot, and the choices are made after,
-// serially: the same cover at one thread and at two, ties included. Pools large enough to be
-// split (dozens of patches over thousands of vertices), with areas from three values and
-// errors from two, so that equal gains are common and the tie rules decide.
+// serially: the same cover at one thread and at two, ties included, and from extend_cover as
+// from greedy_cover and improve_cover. Pools large enough to be split (dozens of patches over
+// thousands of vertices), with areas from three values and errors from two, so that equal
+// gains are common and the tie rules decide.
 TEST(GreedyCover, SameCoverWhateverTheThreadCount) {
   std::mt19937 rng(7);
   for (int trial = 0; trial < 12; ++trial) {
@@ -410,12 +411,18 @@ TEST(GreedyCover, SameCoverWhateverTheThreadCount) {
       greedy_cover(pool, area, o, &c);
       improve_cover(pool, area, 8, &c);
       covers.push_back(c);
+      Cover e = empty_cover(area);  // the two calls in one
+      extend_cover(pool, area, o, 8, &e);
+      covers.push_back(e);
     }
     SCOPED_TRACE(::testing::Message() << "trial " << trial);
-    EXPECT_EQ(covers[0].picks, covers[1].picks);
-    EXPECT_EQ(covers[0].curve, covers[1].curve);
-    EXPECT_EQ(covers[0].vertex_patch, covers[1].vertex_patch);
-    EXPECT_EQ(covers[0].covered_area, covers[1].covered_area);
+    for (std::size_t k = 1; k < covers.size(); ++k) {
+      EXPECT_EQ(covers[0].picks, covers[k].picks);
+      EXPECT_EQ(covers[0].curve, covers[k].curve);
+      EXPECT_EQ(covers[0].vertex_patch, covers[k].vertex_patch);
+      EXPECT_EQ(covers[0].covered_area, covers[k].covered_area);
+      EXPECT_EQ(covers[0].used, covers[k].used);
+    }
     expect_cover_consistent(pool, area, covers[1], true);
   }
 }
