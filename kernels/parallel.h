@@ -65,9 +65,8 @@ class Crew {
   void parallel_for(std::size_t begin, std::size_t end,
                     const std::function<void(std::size_t, std::size_t)>& body, std::size_t grain = 64);
 
-  struct State;
-
  private:
+  struct State;
   friend void with_crew(const std::function<void(Crew&)>& stage);
   explicit Crew(State* state) : state_(state) {}
   State* state_;

@@ -35,7 +35,8 @@ Cover empty_cover(const VecX& area) {
 namespace {
 // True when `c` has as many picks as it may, or covers the target.
 bool full(const Cover& c, const CoverOptions& o) {
-  return static_cast<int>(c.picks.size()) >= o.max_patches || c.covered_area >= o.coverage_target * c.total_area;
+  return static_cast<int>(c.picks.size()) >= o.max_patches ||
+         c.covered_area >= o.coverage_target * c.total_area;
 }
 
 // greedy_cover's picks, with `crew` for the sums.
@@ -67,7 +68,6 @@ void greedy_on(Crew& crew, const std::vector<Patch>& pool, const VecX& area, con
     c->curve.push_back(c->fraction());
   }
 }
-
 
 Cover order_on(Crew& crew, const std::vector<Patch>& pool, const VecX& area, std::vector<int> picks);
 

@@ -42,13 +42,14 @@ void greedy_cover(const std::vector<Patch>& pool, const VecX& area, const CoverO
 // Local improvement of a cover (the greedy choice is myopic: an early large patch may leave
 // gaps that no later one fills well): while some swap of a picked patch for an unpicked one of
 // the pool covers more area, make the best such swap. The number of patches stays; the picks
-// are then ordered by order_cover and the cover rebuilt. Deterministic.
+// are then ordered by order_cover and the cover rebuilt. Deterministic. Each patch lists a
+// covered vertex once (as evaluate_patch makes them).
 void improve_cover(const std::vector<Patch>& pool, const VecX& area, int max_swaps, Cover* cover);
 
 // greedy_cover, then improve_cover where the cover has picks: the same cover as the two calls,
 // with the threads woken once for both (kernels/parallel.h, with_crew).
-void extend_cover(const std::vector<Patch>& pool, const VecX& area, const CoverOptions& options, int max_swaps,
-                  Cover* cover);
+void extend_cover(const std::vector<Patch>& pool, const VecX& area, const CoverOptions& options,
+                  int max_swaps, Cover* cover);
 
 // The cover of exactly `picks` (pool indices), in the order that covers the most early on: the
 // greedy order (the largest gain first) or the reverse of backward elimination (dropping, from
