@@ -37,6 +37,13 @@ Patch random_run(std::mt19937& rng, int V, int max_len, int error_levels) {
   return make_patch(verts, 0.01 * static_cast<double>(rng() % error_levels));
 }
 
+// V vertex areas, each 0.5, 1 or 1.5: equal sums, and so ties, are common.
+VecX three_valued_areas(std::mt19937& rng, int V) {
+  VecX area(V);
+  for (int v = 0; v < V; ++v) area(v) = 0.5 * (1 + static_cast<int>(rng() % 3));
+  return area;
+}
+
 double union_area(const std::vector<Patch>& pool, const std::vector<int>& picks, const VecX& area) {
   std::vector<char> seen(static_cast<std::size_t>(area.size()), 0);
   double sum = 0.0;
@@ -397,8 +404,7 @@ TEST(GreedyCover, SameCoverWhateverTheThreadCount) {
   std::mt19937 rng(7);
   for (int trial = 0; trial < 12; ++trial) {
     const int V = 2000 + static_cast<int>(rng() % 2000), P = 20 + static_cast<int>(rng() % 40);
-    VecX area(V);
-    for (int v = 0; v < V; ++v) area(v) = 0.5 * (1 + static_cast<int>(rng() % 3));
+    const VecX area = three_valued_areas(rng, V);
     std::vector<Patch> pool;
     for (int k = 0; k < P; ++k) pool.push_back(random_run(rng, V, V / 4, 2));
     if (trial % 3 == 0) pool.push_back(pool[rng() % pool.size()]);  // an exact duplicate
@@ -469,8 +475,7 @@ TEST(ImproveCover, SameSwapsAsTakingEachPickOutInTurn) {
   int swapped = 0;
   for (int trial = 0; trial < 100; ++trial) {
     const int V = 200 + static_cast<int>(rng() % 800), P = 10 + static_cast<int>(rng() % 30);
-    VecX area(V);
-    for (int v = 0; v < V; ++v) area(v) = 0.5 * (1 + static_cast<int>(rng() % 3));
+    const VecX area = three_valued_areas(rng, V);
     std::vector<Patch> pool;
     for (int k = 0; k < P; ++k) pool.push_back(random_run(rng, V, V / 3, 2));
     CoverOptions o;
