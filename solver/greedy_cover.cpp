@@ -1,6 +1,7 @@
 #include "solver/greedy_cover.h"
 
 #include <algorithm>
+#include <limits>
 #include <numeric>
 
 #include "kernels/parallel.h"
@@ -180,21 +181,37 @@ Cover cover_in_order(const std::vector<Patch>& pool, const VecX& area, const std
 }
 }  // namespace
 
-namespace {
-// Greedy order of `picks`: largest gain first, ties to the lower error, then the lower index.
+// The two orders below choose, step by step, the pick with the best sum over its vertices.
+// A pick's sum moves only one way from step to step, so its last value bounds the next: a
+// greedy gain only falls as more is covered, and a loss only grows as picks are dropped
+// (the sum of fewer, or more, of the same non-negative terms, added in the same order, and
+// rounding keeps that order). Each step sums afresh only the picks whose bound could still
+// beat or tie the best fresh sum, taken best bound first: the choice is the same as summing
+// every pick, bit for bit, at a fraction of the sums.
+
 std::vector<int> greedy_order(const std::vector<Patch>& pool, const VecX& area, const std::vector<int>& picks) {
+  const std::size_t P = picks.size();
   std::vector<int> greedy;
-  std::vector<char> covered(static_cast<std::size_t>(area.size()), 0), taken(picks.size(), 0);
-  for (std::size_t step = 0; step < picks.size(); ++step) {
+  std::vector<char> covered(static_cast<std::size_t>(area.size()), 0), taken(P, 0), fresh(P);
+  std::vector<double> bound(P, std::numeric_limits<double>::infinity());  // at least the gain
+  const auto error = [&](int i) { return pool[static_cast<std::size_t>(picks[static_cast<std::size_t>(i)])].error.max; };
+  for (std::size_t step = 0; step < P; ++step) {
+    std::fill(fresh.begin(), fresh.end(), 0);
     int best = -1;
     double best_gain = -1.0;
-    for (std::size_t i = 0; i < picks.size(); ++i) {
-      if (taken[i]) continue;
-      const Patch& p = pool[static_cast<std::size_t>(picks[i])];
+    for (;;) {
+      int next = -1;  // the largest bound not summed this step, the lower index first
+      for (std::size_t i = 0; i < P; ++i)
+        if (!taken[i] && !fresh[i] && (next < 0 || bound[i] > bound[static_cast<std::size_t>(next)]))
+          next = static_cast<int>(i);
+      if (next < 0 || (best >= 0 && bound[static_cast<std::size_t>(next)] < best_gain)) break;
+      const Patch& p = pool[static_cast<std::size_t>(picks[static_cast<std::size_t>(next)])];
       const double gain = area_where(p.covered_vertices, area, [&](std::size_t v) { return !covered[v]; });
+      bound[static_cast<std::size_t>(next)] = gain;
+      fresh[static_cast<std::size_t>(next)] = 1;
       const bool better = best < 0 || gain > best_gain ||
-                          (gain == best_gain && p.error.max < pool[static_cast<std::size_t>(picks[best])].error.max);
-      if (better) best = static_cast<int>(i), best_gain = gain;
+                          (gain == best_gain && (error(next) < error(best) || (error(next) == error(best) && next < best)));
+      if (better) best = next, best_gain = gain;
     }
     taken[static_cast<std::size_t>(best)] = 1;
     greedy.push_back(picks[static_cast<std::size_t>(best)]);
@@ -203,22 +220,29 @@ std::vector<int> greedy_order(const std::vector<Patch>& pool, const VecX& area, 
   return greedy;
 }
 
-// Backward elimination of `picks`: drop the pick that loses the least area, ties the higher
-// index; the order is the reverse of the drops.
 std::vector<int> elimination_order(const std::vector<Patch>& pool, const VecX& area, const std::vector<int>& picks) {
+  const std::size_t P = picks.size();
   std::vector<int> eliminated;
   std::vector<int> count(static_cast<std::size_t>(area.size()), 0);
   for (int k : picks)
     for (int v : pool[static_cast<std::size_t>(k)].covered_vertices) ++count[static_cast<std::size_t>(v)];
-  std::vector<char> gone(picks.size(), 0);
-  for (std::size_t step = 0; step < picks.size(); ++step) {
+  std::vector<char> gone(P, 0), fresh(P);
+  std::vector<double> bound(P, 0.0);  // at most the loss
+  for (std::size_t step = 0; step < P; ++step) {
+    std::fill(fresh.begin(), fresh.end(), 0);
     int worst = -1;
     double worst_loss = 0.0;
-    for (std::size_t i = picks.size(); i-- > 0;) {
-      if (gone[i]) continue;
-      const double loss = area_where(pool[static_cast<std::size_t>(picks[i])].covered_vertices, area,
-                                     [&](std::size_t v) { return count[v] == 1; });
-      if (worst < 0 || loss < worst_loss) worst = static_cast<int>(i), worst_loss = loss;
+    for (;;) {
+      int next = -1;  // the smallest bound not summed this step, the higher index first
+      for (std::size_t i = P; i-- > 0;)
+        if (!gone[i] && !fresh[i] && (next < 0 || bound[i] < bound[static_cast<std::size_t>(next)]))
+          next = static_cast<int>(i);
+      if (next < 0 || (worst >= 0 && bound[static_cast<std::size_t>(next)] > worst_loss)) break;
+      const double loss = area_where(pool[static_cast<std::size_t>(picks[static_cast<std::size_t>(next)])].covered_vertices,
+                                     area, [&](std::size_t v) { return count[v] == 1; });
+      bound[static_cast<std::size_t>(next)] = loss;
+      fresh[static_cast<std::size_t>(next)] = 1;
+      if (worst < 0 || loss < worst_loss || (loss == worst_loss && next > worst)) worst = next, worst_loss = loss;
     }
     gone[static_cast<std::size_t>(worst)] = 1;
     eliminated.push_back(picks[static_cast<std::size_t>(worst)]);
@@ -228,6 +252,7 @@ std::vector<int> elimination_order(const std::vector<Patch>& pool, const VecX& a
   return eliminated;
 }
 
+namespace {
 Cover order_on(Crew& crew, const std::vector<Patch>& pool, const VecX& area, std::vector<int> picks) {
   std::sort(picks.begin(), picks.end());
   // The two orders and their covers are independent: one task each. (Their steps, a dozen

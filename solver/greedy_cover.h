@@ -59,6 +59,12 @@ void extend_cover(const std::vector<Patch>& pool, const VecX& area, const CoverO
 // eight often cover several percent more. Ties within either go to the lower pool index.
 Cover order_cover(const std::vector<Patch>& pool, const VecX& area, std::vector<int> picks);
 
+// order_cover's two orders of `picks` (pool indices). The greedy order takes the largest gain
+// first (ties: the lower error, then the earlier in `picks`); elimination drops the pick that
+// loses the least (ties: the later in `picks`), and its order is the reverse of the drops.
+std::vector<int> greedy_order(const std::vector<Patch>& pool, const VecX& area, const std::vector<int>& picks);
+std::vector<int> elimination_order(const std::vector<Patch>& pool, const VecX& area, const std::vector<int>& picks);
+
 struct UncoveredRegion {
   double area = 0.0;
   Vec3 centroid = Vec3::Zero();

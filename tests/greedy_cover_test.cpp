@@ -494,6 +494,78 @@ TEST(ImproveCover, SameSwapsAsTakingEachPickOutInTurn) {
   EXPECT_GE(swapped, 10);  // the pools exercise the swaps, not only the rebuild
 }
 
+// The two orders as specified: every pick summed afresh at every step.
+std::vector<int> greedy_order_summing_all(const std::vector<Patch>& pool, const VecX& area, const std::vector<int>& picks) {
+  std::vector<int> order;
+  std::vector<char> covered(static_cast<std::size_t>(area.size()), 0), taken(picks.size(), 0);
+  for (std::size_t step = 0; step < picks.size(); ++step) {
+    int best = -1;
+    double best_gain = -1.0;
+    for (std::size_t i = 0; i < picks.size(); ++i) {
+      if (taken[i]) continue;
+      const Patch& p = pool[static_cast<std::size_t>(picks[i])];
+      const double gain = gain_over(p, covered, area);
+      if (best < 0 || gain > best_gain ||
+          (gain == best_gain && p.error.max < pool[static_cast<std::size_t>(picks[static_cast<std::size_t>(best)])].error.max))
+        best = static_cast<int>(i), best_gain = gain;
+    }
+    taken[static_cast<std::size_t>(best)] = 1;
+    order.push_back(picks[static_cast<std::size_t>(best)]);
+    for (int v : pool[static_cast<std::size_t>(order.back())].covered_vertices) covered[static_cast<std::size_t>(v)] = 1;
+  }
+  return order;
+}
+
+std::vector<int> elimination_order_summing_all(const std::vector<Patch>& pool, const VecX& area,
+                                               const std::vector<int>& picks) {
+  std::vector<int> dropped;
+  std::vector<int> count(static_cast<std::size_t>(area.size()), 0);
+  for (int k : picks)
+    for (int v : pool[static_cast<std::size_t>(k)].covered_vertices) ++count[static_cast<std::size_t>(v)];
+  std::vector<char> gone(picks.size(), 0);
+  for (std::size_t step = 0; step < picks.size(); ++step) {
+    int worst = -1;
+    double worst_loss = 0.0;
+    for (std::size_t i = picks.size(); i-- > 0;) {
+      if (gone[i]) continue;
+      double loss = 0.0;
+      for (int v : pool[static_cast<std::size_t>(picks[i])].covered_vertices)
+        if (count[static_cast<std::size_t>(v)] == 1) loss += area(v);
+      if (worst < 0 || loss < worst_loss) worst = static_cast<int>(i), worst_loss = loss;
+    }
+    gone[static_cast<std::size_t>(worst)] = 1;
+    dropped.push_back(picks[static_cast<std::size_t>(worst)]);
+    for (int v : pool[static_cast<std::size_t>(dropped.back())].covered_vertices) --count[static_cast<std::size_t>(v)];
+  }
+  std::reverse(dropped.begin(), dropped.end());
+  return dropped;
+}
+
+// The orders sum again only the picks whose last sum could still beat or tie the best: the
+// same orders, ties included, as summing every pick at every step. Pools with equal sums
+// common (three area values, two error levels, entries repeated).
+TEST(OrderCover, SameOrdersAsSummingEveryPickEachStep) {
+  std::mt19937 rng(5);
+  int orders_differ = 0;
+  for (int trial = 0; trial < 300; ++trial) {
+    const int V = 100 + static_cast<int>(rng() % 400), P = 2 + static_cast<int>(rng() % 24);
+    const VecX area = three_valued_areas(rng, V);
+    std::vector<Patch> pool;
+    for (int k = 0; k < P; ++k)
+      pool.push_back(k > 0 && rng() % 5 == 0 ? pool[rng() % static_cast<unsigned>(k)] : random_run(rng, V, V / 2, 2));
+    std::vector<int> picks;
+    for (int k = 0; k < P; ++k)
+      if (rng() % 4 != 0) picks.push_back(k);
+    SCOPED_TRACE(::testing::Message() << "trial " << trial);
+    const std::vector<int> greedy = greedy_order(pool, area, picks);
+    const std::vector<int> eliminated = elimination_order(pool, area, picks);
+    EXPECT_EQ(greedy, greedy_order_summing_all(pool, area, picks));
+    EXPECT_EQ(eliminated, elimination_order_summing_all(pool, area, picks));
+    orders_differ += greedy != eliminated;
+  }
+  EXPECT_GE(orders_differ, 50);  // the two orders are not the same search
+}
+
 // order_cover returns the picks themselves, in an order that covers at least as much summed
 // over 1..k as the greedy order does, and covers more with fewer patches when greedy commits
 // to a large patch first: here the big middle patch (6 of 10 vertices) overlaps both halves
