@@ -267,6 +267,50 @@ struct RoundLines {
   std::size_t looked = 0;            // seeds whose lines are in `lines`
 };
 
+// One round's search of its seeds (step 2). Each seed's lines are kept per seed and joined in
+// seed order, whatever the order the threads searched them in.
+struct SeedSearch {
+  SeedSearch(const std::vector<Seed>& round_seeds, CoveredFaces cover, bool keep_searches)
+      : seeds(round_seeds),
+        covered(std::move(cover)),
+        keep(keep_searches),
+        per_seed(round_seeds.size()),
+        scored(round_seeds.size(), 0),
+        reused(round_seeds.size(), 0),
+        runs(round_seeds.size()),
+        searched(round_seeds.size(), 0) {}
+
+  // Takes in the seeds searched past `looked`, in seed order; with `nearly_all`, true when it
+  // took in one with a line that may cover that much of Φ (the search pauses there).
+  bool look(std::optional<double> nearly_all) {
+    while (looked < seeds.size() && searched[looked]) {
+      const std::vector<LineCandidate>& ls = per_seed[looked++];
+      if (nearly_all &&
+          std::any_of(ls.begin(), ls.end(), [&](const LineCandidate& c) { return c.estimate >= *nearly_all; }))
+        return true;
+    }
+    return false;
+  }
+  // The lines of seeds [0, seed_count), best first.
+  std::vector<LineCandidate> ranked(std::size_t seed_count) const {
+    std::vector<LineCandidate> lines;
+    for (std::size_t s = 0; s < seed_count; ++s) lines.insert(lines.end(), per_seed[s].begin(), per_seed[s].end());
+    std::stable_sort(lines.begin(), lines.end(),
+                     [](const LineCandidate& x, const LineCandidate& y) { return x.estimate > y.estimate; });
+    return lines;
+  }
+
+  const std::vector<Seed>& seeds;
+  const CoveredFaces covered;  // empty in round 0, which searches without a cover
+  const bool keep;             // searches are kept for later rounds (only those with a cover)
+  std::vector<std::vector<LineCandidate>> per_seed;
+  std::vector<long long> scored;              // lines scored, per seed
+  std::vector<char> reused;                   // per seed: an earlier round's search held
+  std::vector<std::vector<FreeRunRecord>> runs;  // per seed, where kept
+  std::vector<char> searched;                 // per seed
+  std::size_t looked = 0;                     // seeds [0, looked) searched and looked at in order
+};
+
 // One decomposition's state over its rounds (steps 1-4) and finishes (step 5): the pool of
 // candidate patches, what was grown and searched, and the cover.
 class Decomposition {
@@ -312,6 +356,15 @@ class Decomposition {
  private:
   std::vector<Seed> seeds(int round);                                             // step 1
   RoundLines candidate_lines(const RoundBars& bars, const std::vector<Seed>& seeds);  // step 2
+  // Searches seed s of `r`, or takes an earlier round's search of it where that still holds;
+  // false when `stop` ended the search part-way (nothing of it is kept: the seed is searched
+  // again if the search goes on).
+  bool search_seed(SeedSearch& r, std::size_t s, const std::atomic<bool>* stop);
+  // Searches the seeds of `r` after `looked` not yet searched, one per thread, in seed order;
+  // with `nearly_all`, true when one of them paused the search.
+  bool search_beside(SeedSearch& r, std::optional<double> nearly_all);
+  // Counts what `r` searched, and keeps its searches for later rounds.
+  void record(SeedSearch& r);
   // Step 2's try of the candidates at the head of `lines` that may cover the target alone.
   bool grow_alone(const RoundBars& bars, const std::vector<LineCandidate>& lines);
   void grow(const RoundBars& bars, const std::vector<LineCandidate>& lines);  // step 3
@@ -432,63 +485,78 @@ bool Decomposition::grow_alone(const RoundBars& bars, const std::vector<LineCand
 
 // 2. Candidate lines, one task per seed, handed out in seed order; per-seed results keep the
 // order deterministic.
+bool Decomposition::search_seed(SeedSearch& r, std::size_t s, const std::atomic<bool>* stop) {
+  const std::vector<LineCandidate>* known = r.keep ? seed_cache_.find(work_, r.seeds[s], r.covered) : nullptr;
+  if (known) {
+    r.reused[s] = 1;
+    r.per_seed[s] = *known;
+    for (LineCandidate& c : r.per_seed[s]) c.seed = static_cast<int>(s);
+    rank_candidates(r.per_seed[s], r.covered);
+    return true;
+  }
+  SearchStop halt{stop};
+  r.per_seed[s] = seed_candidates(work_, r.seeds[s], static_cast<int>(s), r.covered, s_.lines, s_.grow.thresholds,
+                                  &r.scored[s], r.keep ? &r.runs[s] : nullptr, stop ? &halt : nullptr);
+  if (!halt.stopped) return true;
+  r.per_seed[s].clear();
+  r.scored[s] = 0;
+  r.runs[s].clear();
+  return false;
+}
+
+bool Decomposition::search_beside(SeedSearch& r, std::optional<double> nearly_all) {
+  std::vector<std::size_t> pending;  // after a pause, those stopped part-way come again
+  for (std::size_t s = r.looked; s < r.seeds.size(); ++s)
+    if (!r.searched[s]) pending.push_back(s);
+  if (pending.empty()) return false;
+  std::mutex looked_mutex;
+  std::atomic<bool> pause{false};
+  std::atomic<std::size_t> next{0};
+  parallel_invoke_each(static_cast<std::size_t>(max_threads()), [&](std::size_t) {
+    while (!pause) {
+      const std::size_t i = next++;
+      if (i >= pending.size()) return;
+      const std::size_t s = pending[i];
+      // Once a seed before it pauses the search, a seed still searched is stopped: the try
+      // that follows gets every thread, and whether it ends the search or not, what the
+      // stopped seed would give is the same when searched again.
+      if (!search_seed(r, s, nearly_all ? &pause : nullptr)) continue;
+      const std::lock_guard<std::mutex> lock(looked_mutex);
+      r.searched[s] = 1;
+      if (!pause && r.look(nearly_all)) pause = true;
+    }
+  });
+  return pause;
+}
+
+void Decomposition::record(SeedSearch& r) {
+  for (std::size_t s = 0; s < r.seeds.size(); ++s) {
+    if (!r.searched[s]) continue;
+    out_.lines_scored += r.scored[s];
+    if (r.reused[s]) ++out_.seeds_reused;
+    else if (r.keep) seed_cache_.entries.push_back({r.seeds[s], std::move(r.runs[s]), r.per_seed[s]});
+  }
+}
+
 RoundLines Decomposition::candidate_lines(const RoundBars& bars, const std::vector<Seed>& seeds) {
   const auto t0 = Clock::now();
   double early_s = 0.0;  // growth before every seed was searched: counted as the fit's
-  const CoveredFaces covered = bars.round == 0 ? CoveredFaces{} : faces_of(mesh_, cover_.vertex_patch);
-  std::vector<std::vector<LineCandidate>> per_seed(seeds.size());
-  std::vector<long long> scored(seeds.size(), 0);
+  CoveredFaces covered = bars.round == 0 ? CoveredFaces{} : faces_of(mesh_, cover_.vertex_patch);
   // Round 0 sees no cover (and searches without it): only later rounds' searches are kept.
   const bool keep = o_.reuse_seeds && !covered.empty();
-  std::vector<char> reused(seeds.size(), 0);
-  std::vector<std::vector<FreeRunRecord>> runs(seeds.size());
-  // Searches seed s; false when `stop` ended the search part-way (nothing of it is kept: the
-  // seed is searched again if the search goes on).
-  const auto search = [&](std::size_t s, const std::atomic<bool>* stop) {
-    const std::vector<LineCandidate>* known = keep ? seed_cache_.find(work_, seeds[s], covered) : nullptr;
-    if (known) {
-      reused[s] = 1;
-      per_seed[s] = *known;
-      for (LineCandidate& c : per_seed[s]) c.seed = static_cast<int>(s);
-      rank_candidates(per_seed[s], covered);
-      return true;
-    }
-    SearchStop halt{stop};
-    per_seed[s] = seed_candidates(work_, seeds[s], static_cast<int>(s), covered, s_.lines, s_.grow.thresholds,
-                                  &scored[s], keep ? &runs[s] : nullptr, stop ? &halt : nullptr);
-    if (!halt.stopped) return true;
-    per_seed[s].clear();
-    scored[s] = 0;
-    runs[s].clear();
-    return false;
-  };
-  const auto ranked = [&](std::size_t seed_count) {  // the lines of seeds [0, seed_count), best first
-    std::vector<LineCandidate> lines;
-    for (std::size_t s = 0; s < seed_count; ++s) lines.insert(lines.end(), per_seed[s].begin(), per_seed[s].end());
-    std::stable_sort(lines.begin(), lines.end(),
-                     [](const LineCandidate& x, const LineCandidate& y) { return x.estimate > y.estimate; });
-    return lines;
-  };
+  SeedSearch r(seeds, std::move(covered), keep);
   // A line that may cover nearly all of Φ is tried before the seeds after its own are
-  // searched (DecomposeOptions::grow_early): seeds [0, looked) have been searched and looked
-  // at in order, and the search pauses at the first whose lines include one. Once, in a
-  // round: where that try leaves too much, one patch rarely leaves less (a coarse mesh, a
-  // surface not quite one envelope), and each try costs fits.
-  std::vector<char> searched(seeds.size(), 0);
+  // searched (DecomposeOptions::grow_early): the search pauses at the first seed, in seed
+  // order, whose lines include one. Once, in a round: where that try leaves too much, one
+  // patch rarely leaves less (a coarse mesh, a surface not quite one envelope), and each try
+  // costs fits.
   RoundLines out;
-  std::size_t& looked = out.looked;
   bool may_pause = o_.grow_early, first_alone = false;
-  const auto look = [&] {  // true when it took in a seed with a line that may cover nearly all
-    while (looked < seeds.size() && searched[looked]) {
-      const std::vector<LineCandidate>& ls = per_seed[looked++];
-      if (may_pause &&
-          std::any_of(ls.begin(), ls.end(), [&](const LineCandidate& c) { return c.estimate >= bars.nearly_all; }))
-        return true;
-    }
-    return false;
+  const auto pause_at = [&]() -> std::optional<double> {
+    return may_pause ? std::optional<double>(bars.nearly_all) : std::nullopt;
   };
   for (;;) {
-    bool paused = look();  // seeds searched past the last pause
+    bool paused = r.look(pause_at());  // seeds searched past the last pause
     if (!paused && !first_alone && !seeds.empty() && may_pause &&
         cover_.covered_area <= cover_.total_area - bars.nearly_all) {
       // While Φ is nearly all uncovered (in the first round), the first seed by itself,
@@ -497,45 +565,21 @@ RoundLines Decomposition::candidate_lines(const RoundBars& bars, const std::vect
       // for nothing. Elsewhere this is one seed of some twenty with both threads inside
       // instead of one thread each, at some cost in efficiency.
       first_alone = true;
-      search(0, nullptr);
-      searched[0] = 1;
-      paused = look();
+      search_seed(r, 0, nullptr);
+      r.searched[0] = 1;
+      paused = r.look(pause_at());
     }
-    // The seeds not yet searched, in seed order: after a pause, those searched beside the
-    // one that paused and stopped part-way come again.
-    std::vector<std::size_t> pending;
-    for (std::size_t s = looked; s < seeds.size(); ++s)
-      if (!searched[s]) pending.push_back(s);
-    if (!paused && !pending.empty()) {
-      std::mutex looked_mutex;
-      std::atomic<bool> pause{false};
-      std::atomic<std::size_t> next{0};
-      parallel_invoke_each(static_cast<std::size_t>(max_threads()), [&](std::size_t) {
-        while (!pause) {
-          const std::size_t i = next++;
-          if (i >= pending.size()) return;
-          const std::size_t s = pending[i];
-          // Once a seed before it pauses the search, a seed still searched is stopped: the
-          // try that follows gets every thread, and whether it ends the search or not, what
-          // the stopped seed would give is the same when searched again.
-          if (!search(s, may_pause ? &pause : nullptr)) continue;
-          const std::lock_guard<std::mutex> lock(looked_mutex);
-          searched[s] = 1;
-          if (!pause && look()) pause = true;
-        }
-      });
-      paused = pause;
-    }
+    if (!paused) paused = search_beside(r, pause_at());
     if (!paused) {
-      out.lines = ranked(seeds.size());
+      out.lines = r.ranked(seeds.size());
       break;
     }
     // Seeds [0, looked) hold a line that may cover nearly all of Φ: these seeds' lines are
     // grown as step 3 would grow them. A patch that leaves less than min_round_gain ends the
     // search, and these seeds' lines are then the round's candidates.
-    std::vector<LineCandidate> first = ranked(looked);
+    std::vector<LineCandidate> first = r.ranked(r.looked);
     if (o_.trace)
-      o_.trace("round " + std::to_string(bars.round + 1) + " paused after seed " + std::to_string(looked - 1) +
+      o_.trace("round " + std::to_string(bars.round + 1) + " paused after seed " + std::to_string(r.looked - 1) +
                " of " + std::to_string(seeds.size()) + ": a line may cover nearly all of the part");
     const auto t_early = Clock::now();
     const bool done = grow_alone(bars, first);
@@ -547,12 +591,8 @@ RoundLines Decomposition::candidate_lines(const RoundBars& bars, const std::vect
       break;
     }
   }
-  for (std::size_t s = 0; s < seeds.size(); ++s) {
-    if (!searched[s]) continue;
-    out_.lines_scored += scored[s];
-    if (reused[s]) ++out_.seeds_reused;
-    else if (keep) seed_cache_.entries.push_back({seeds[s], std::move(runs[s]), per_seed[s]});
-  }
+  out.looked = r.looked;
+  record(r);
   out_.times.candidates += since(t0) - early_s;
   out_.times.fit += early_s;
   return out;
