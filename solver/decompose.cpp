@@ -368,6 +368,19 @@ class Decomposition {
   // Step 2's try of the candidates at the head of `lines` that may cover the target alone.
   bool grow_alone(const RoundBars& bars, const std::vector<LineCandidate>& lines);
   void grow(const RoundBars& bars, const std::vector<LineCandidate>& lines);  // step 3
+  // One batch of step 3: its candidates in rank order, each grown, or taken from an earlier
+  // round or an early try; those after the first that covers the target alone are dropped.
+  struct GrownBatch {
+    std::vector<const LineCandidate*> lines;
+    std::vector<Grown> grown;
+    std::vector<const Grown*> known;  // grown in an earlier round (cache_), or null
+    std::size_t kept = 0;             // grown[0, kept) are kept
+    bool enough = false;              // grown[kept - 1] covers the target alone
+  };
+  GrownBatch grow_batch(const RoundBars& bars, std::vector<const LineCandidate*> lines);
+  // Puts the kept patches of `b` in the pool (and what was grown anew in the cache); returns
+  // the pool entry that covers the target alone, or -1.
+  int take_in(const RoundBars& bars, GrownBatch& b, int& grown_this_round);
 
   const SurfaceIndex& work_;  // Φ, or its smoothed copy
   const Mesh& mesh_;
@@ -600,6 +613,80 @@ RoundLines Decomposition::candidate_lines(const RoundBars& bars, const std::vect
 
 // 3. Grow the best in batches of o.batch, concurrently within a batch. A candidate over area
 // that a grown patch already covers is skipped: it would grow that patch again.
+Decomposition::GrownBatch Decomposition::grow_batch(const RoundBars& bars, std::vector<const LineCandidate*> lines) {
+  GrownBatch b;
+  b.lines = std::move(lines);
+  const std::size_t n = b.lines.size();
+  b.grown.resize(n);
+  b.known.resize(n);
+  for (std::size_t k = 0; k < n; ++k) b.known[k] = o_.reuse_grown ? cache_.find(*b.lines[k]) : nullptr;
+  // The batch is grown in rank order, concurrently, and is kept up to the first candidate
+  // that grows a patch covering the target alone: a part one sweep covers grows one
+  // candidate instead of a batch. Which candidate that is follows from what each grows,
+  // never from which finished first, so the answer is the same at every thread count.
+  // Tasks take candidates in rank order and start none past that one once it is known;
+  // those already running finish and are dropped. Where no patch covers the target alone,
+  // the whole batch is grown: a cover of several patches picks among all of them (the
+  // first candidate with which the pool reached the target, as a stop, left freeform/6
+  // of scripts/coverage_curves.py with 95.4% in 4 patches instead of 98.8% in 5).
+  std::mutex kept_mutex;
+  std::atomic<std::size_t> next_task{0};
+  std::atomic<bool> enough{false};
+  std::vector<char> done(n, 0);
+  const auto grow_next = [&] {  // the next candidate in rank order
+    const std::size_t k = next_task++;
+    if (enough) return;
+    if (b.known[k]) b.grown[k] = *b.known[k];
+    else if (const Grown* g = early_.find(*b.lines[k])) b.grown[k] = *g;
+    else b.grown[k] = grow_patch(work_, *b.lines[k], s_.grow);
+    const std::lock_guard<std::mutex> lock(kept_mutex);
+    done[k] = 1;
+    while (!enough && b.kept < n && done[b.kept])
+      if (bars.covers_alone(b.grown[b.kept++])) enough = true;
+  };
+  // Candidates whose probe sweep passed over the target's area may cover it alone: in rank
+  // order, each is grown by itself, with both threads inside its fits and evaluations,
+  // until one does or the next could not; the rest of the batch then grows concurrently.
+  // Grown side by side instead, a candidate that covers the part alone took as long as on
+  // one thread, while the next was grown for nothing (the 13k cone part, cone cutters: fit
+  // 45 ms on 1 thread, 50 ms on 2). The same candidates are kept either way. Real faces,
+  // whose best line passes over under half of the part, never grow this way.
+  std::size_t first = 0;
+  for (; first < n && !enough && b.lines[first]->estimate >= bars.target_area; ++first) grow_next();
+  parallel_invoke_each(n - first, [&](std::size_t) { grow_next(); });
+  b.enough = enough;
+  return b;
+}
+
+int Decomposition::take_in(const RoundBars& bars, GrownBatch& b, int& grown_this_round) {
+  const DecomposeOptions& o = o_;
+  // The cache after the batch: b.known points into it.
+  for (std::size_t k = 0; k < b.kept; ++k)
+    if (o.reuse_grown && !b.known[k])
+      cache_.entries.push_back({b.lines[k]->line, b.lines[k]->kind, b.lines[k]->sweep.rulings, b.grown[k]});
+  if (o.on_grown) {
+    std::vector<std::size_t> fitted;
+    for (std::size_t k = 0; k < b.kept; ++k)
+      if (!b.known[k]) fitted.push_back(k);
+    parallel_invoke_each(fitted.size(), [&](std::size_t i) {
+      o.on_grown(work_, *b.lines[fitted[i]], s_.grow, b.grown[fitted[i]]);
+    });
+  }
+  int alone = -1;
+  for (std::size_t k = 0; k < b.kept; ++k) {
+    ++(b.known[k] ? out_.regrown : out_.grown);
+    ++grown_this_round;
+    for (Patch& p : b.grown[k].patches) {
+      ++out_.candidates_valid;
+      if (b.enough && k + 1 == b.kept && alone < 0 && p.covered_area >= bars.target_area)
+        alone = static_cast<int>(pool_.size());
+      claims_.push_back(claim_of(p, mesh_.vertex_count()));
+      pool_.push_back(std::move(p));
+    }
+  }
+  return alone;
+}
+
 void Decomposition::grow(const RoundBars& bars, const std::vector<LineCandidate>& lines) {
   const DecomposeOptions& o = o_;
   const auto t0 = Clock::now();
@@ -615,72 +702,11 @@ void Decomposition::grow(const RoundBars& bars, const std::vector<LineCandidate>
       if (!already_claimed(work_, c, claims_)) batch.push_back(&c);
     }
     if (batch.empty()) break;
-    std::vector<Grown> grown(batch.size());
-    std::vector<const Grown*> known(batch.size());
-    for (std::size_t k = 0; k < batch.size(); ++k) known[k] = o.reuse_grown ? cache_.find(*batch[k]) : nullptr;
-    // The batch is grown in rank order, concurrently, and is kept up to the first candidate
-    // that grows a patch covering the target alone: a part one sweep covers grows one
-    // candidate instead of a batch. Which candidate that is follows from what each grows,
-    // never from which finished first, so the answer is the same at every thread count.
-    // Tasks take candidates in rank order and start none past that one once it is known;
-    // those already running finish and are dropped. Where no patch covers the target alone,
-    // the whole batch is grown: a cover of several patches picks among all of them (the
-    // first candidate with which the pool reached the target, as a stop, left freeform/6
-    // of scripts/coverage_curves.py with 95.4% in 4 patches instead of 98.8% in 5).
-    std::mutex kept_mutex;
-    std::atomic<std::size_t> next_task{0};
-    std::atomic<bool> enough{false};
-    std::vector<char> done(batch.size(), 0);
-    std::size_t kept = 0;  // grown[0, kept) are kept
-    const auto grow_next = [&] {  // the next candidate in rank order
-      const std::size_t k = next_task++;
-      if (enough) return;
-      if (known[k]) grown[k] = *known[k];
-      else if (const Grown* g = early_.find(*batch[k])) grown[k] = *g;
-      else grown[k] = grow_patch(work_, *batch[k], s_.grow);
-      const std::lock_guard<std::mutex> lock(kept_mutex);
-      done[k] = 1;
-      while (!enough && kept < batch.size() && done[kept])
-        if (bars.covers_alone(grown[kept++])) enough = true;
-    };
-    // Candidates whose probe sweep passed over the target's area may cover it alone: in rank
-    // order, each is grown by itself, with both threads inside its fits and evaluations,
-    // until one does or the next could not; the rest of the batch then grows concurrently.
-    // Grown side by side instead, a candidate that covers the part alone took as long as on
-    // one thread, while the next was grown for nothing (the 13k cone part, cone cutters: fit
-    // 45 ms on 1 thread, 50 ms on 2). The same candidates are kept either way. Real faces,
-    // whose best line passes over under half of the part, never grow this way.
-    std::size_t first = 0;
-    for (; first < batch.size() && !enough && batch[first]->estimate >= bars.target_area; ++first) grow_next();
-    parallel_invoke_each(batch.size() - first, [&](std::size_t) { grow_next(); });
-    // The cache after the batch: known[] points into it.
-    for (std::size_t k = 0; k < kept; ++k)
-      if (o.reuse_grown && !known[k])
-        cache_.entries.push_back({batch[k]->line, batch[k]->kind, batch[k]->sweep.rulings, grown[k]});
-    if (o.on_grown) {
-      std::vector<std::size_t> fitted;
-      for (std::size_t k = 0; k < kept; ++k)
-        if (!known[k]) fitted.push_back(k);
-      parallel_invoke_each(fitted.size(), [&](std::size_t i) {
-        o.on_grown(work_, *batch[fitted[i]], s_.grow, grown[fitted[i]]);
-      });
-    }
-    int alone = -1;  // the pool entry that covers the target alone, where one does
-    for (std::size_t k = 0; k < kept; ++k) {
-      Grown& g = grown[k];
-      ++(known[k] ? out_.regrown : out_.grown);
-      ++grown_this_round;
-      for (Patch& p : g.patches) {
-        ++out_.candidates_valid;
-        if (enough && k + 1 == kept && alone < 0 && p.covered_area >= bars.target_area)
-          alone = static_cast<int>(pool_.size());
-        claims_.push_back(claim_of(p, mesh_.vertex_count()));
-        pool_.push_back(std::move(p));
-      }
-    }
+    GrownBatch b = grow_batch(bars, std::move(batch));
+    const int alone = take_in(bars, b, grown_this_round);
     say_("round " + std::to_string(bars.round + 1) + ": grown " + std::to_string(grown_this_round) + ", " +
          std::to_string(out_.candidates_valid) + " candidate patches so far");
-    if (enough) {
+    if (b.enough) {
       // The coarse grid judged that patch; the finish (step 5) judges it on the fine grid, on
       // which it may cover less, and with its simplest cutter kind. Finished now, it ends the
       // round only if it still covers the target alone; otherwise the candidates after it
@@ -689,8 +715,7 @@ void Decomposition::grow(const RoundBars& bars, const std::vector<LineCandidate>
       if (alone < 0) break;
       finish_picks({alone});
       if (pool_[static_cast<std::size_t>(alone)].covered_area >= bars.target_area) break;
-      enough = false;
-      if (kept < batch.size()) next = static_cast<std::size_t>(batch[kept] - lines.data());
+      if (b.kept < b.lines.size()) next = static_cast<std::size_t>(b.lines[b.kept] - lines.data());
     }
     // Enough in the pool to reach the target: the rest need not be grown.
     Cover trial = cover_;
