@@ -194,7 +194,9 @@ std::vector<int> greedy_order(const std::vector<Patch>& pool, const VecX& area, 
   std::vector<int> greedy;
   std::vector<char> covered(static_cast<std::size_t>(area.size()), 0), taken(P, 0), fresh(P);
   std::vector<double> bound(P, std::numeric_limits<double>::infinity());  // at least the gain
-  const auto error = [&](int i) { return pool[static_cast<std::size_t>(picks[static_cast<std::size_t>(i)])].error.max; };
+  const auto error = [&](int i) {
+    return pool[static_cast<std::size_t>(picks[static_cast<std::size_t>(i)])].error.max;
+  };
   for (std::size_t step = 0; step < P; ++step) {
     std::fill(fresh.begin(), fresh.end(), 0);
     int best = -1;
@@ -210,7 +212,8 @@ std::vector<int> greedy_order(const std::vector<Patch>& pool, const VecX& area, 
       bound[static_cast<std::size_t>(next)] = gain;
       fresh[static_cast<std::size_t>(next)] = 1;
       const bool better = best < 0 || gain > best_gain ||
-                          (gain == best_gain && (error(next) < error(best) || (error(next) == error(best) && next < best)));
+                          (gain == best_gain && (error(next) < error(best) ||
+                                                 (error(next) == error(best) && next < best)));
       if (better) best = next, best_gain = gain;
     }
     taken[static_cast<std::size_t>(best)] = 1;
@@ -238,11 +241,12 @@ std::vector<int> elimination_order(const std::vector<Patch>& pool, const VecX& a
         if (!gone[i] && !fresh[i] && (next < 0 || bound[i] < bound[static_cast<std::size_t>(next)]))
           next = static_cast<int>(i);
       if (next < 0 || (worst >= 0 && bound[static_cast<std::size_t>(next)] > worst_loss)) break;
-      const double loss = area_where(pool[static_cast<std::size_t>(picks[static_cast<std::size_t>(next)])].covered_vertices,
-                                     area, [&](std::size_t v) { return count[v] == 1; });
+      const Patch& p = pool[static_cast<std::size_t>(picks[static_cast<std::size_t>(next)])];
+      const double loss = area_where(p.covered_vertices, area, [&](std::size_t v) { return count[v] == 1; });
       bound[static_cast<std::size_t>(next)] = loss;
       fresh[static_cast<std::size_t>(next)] = 1;
-      if (worst < 0 || loss < worst_loss || (loss == worst_loss && next > worst)) worst = next, worst_loss = loss;
+      if (worst < 0 || loss < worst_loss || (loss == worst_loss && next > worst))
+        worst = next, worst_loss = loss;
     }
     gone[static_cast<std::size_t>(worst)] = 1;
     eliminated.push_back(picks[static_cast<std::size_t>(worst)]);
@@ -255,7 +259,7 @@ std::vector<int> elimination_order(const std::vector<Patch>& pool, const VecX& a
 namespace {
 Cover order_on(Crew& crew, const std::vector<Patch>& pool, const VecX& area, std::vector<int> picks) {
   std::sort(picks.begin(), picks.end());
-  // The two orders and their covers are independent: one task each. (Their steps, a dozen
+  // The two orders and their covers are independent: one task each. (Their steps, a few
   // sums each over a dozen picks, are too short to split: a fork per step cost more than
   // it saved.)
   Cover a, b;

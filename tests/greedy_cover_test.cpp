@@ -495,7 +495,8 @@ TEST(ImproveCover, SameSwapsAsTakingEachPickOutInTurn) {
 }
 
 // The two orders as specified: every pick summed afresh at every step.
-std::vector<int> greedy_order_summing_all(const std::vector<Patch>& pool, const VecX& area, const std::vector<int>& picks) {
+std::vector<int> greedy_order_summing_all(const std::vector<Patch>& pool, const VecX& area,
+                                          const std::vector<int>& picks) {
   std::vector<int> order;
   std::vector<char> covered(static_cast<std::size_t>(area.size()), 0), taken(picks.size(), 0);
   for (std::size_t step = 0; step < picks.size(); ++step) {
@@ -505,13 +506,16 @@ std::vector<int> greedy_order_summing_all(const std::vector<Patch>& pool, const 
       if (taken[i]) continue;
       const Patch& p = pool[static_cast<std::size_t>(picks[i])];
       const double gain = gain_over(p, covered, area);
-      if (best < 0 || gain > best_gain ||
-          (gain == best_gain && p.error.max < pool[static_cast<std::size_t>(picks[static_cast<std::size_t>(best)])].error.max))
+      const auto best_error = [&] {
+        return pool[static_cast<std::size_t>(picks[static_cast<std::size_t>(best)])].error.max;
+      };
+      if (best < 0 || gain > best_gain || (gain == best_gain && p.error.max < best_error()))
         best = static_cast<int>(i), best_gain = gain;
     }
     taken[static_cast<std::size_t>(best)] = 1;
     order.push_back(picks[static_cast<std::size_t>(best)]);
-    for (int v : pool[static_cast<std::size_t>(order.back())].covered_vertices) covered[static_cast<std::size_t>(v)] = 1;
+    for (int v : pool[static_cast<std::size_t>(order.back())].covered_vertices)
+      covered[static_cast<std::size_t>(v)] = 1;
   }
   return order;
 }
@@ -535,7 +539,8 @@ std::vector<int> elimination_order_summing_all(const std::vector<Patch>& pool, c
     }
     gone[static_cast<std::size_t>(worst)] = 1;
     dropped.push_back(picks[static_cast<std::size_t>(worst)]);
-    for (int v : pool[static_cast<std::size_t>(dropped.back())].covered_vertices) --count[static_cast<std::size_t>(v)];
+    for (int v : pool[static_cast<std::size_t>(dropped.back())].covered_vertices)
+      --count[static_cast<std::size_t>(v)];
   }
   std::reverse(dropped.begin(), dropped.end());
   return dropped;
@@ -552,7 +557,8 @@ TEST(OrderCover, SameOrdersAsSummingEveryPickEachStep) {
     const VecX area = three_valued_areas(rng, V);
     std::vector<Patch> pool;
     for (int k = 0; k < P; ++k)
-      pool.push_back(k > 0 && rng() % 5 == 0 ? pool[rng() % static_cast<unsigned>(k)] : random_run(rng, V, V / 2, 2));
+      pool.push_back(k > 0 && rng() % 5 == 0 ? pool[rng() % static_cast<unsigned>(k)]
+                                             : random_run(rng, V, V / 2, 2));
     std::vector<int> picks;
     for (int k = 0; k < P; ++k)
       if (rng() % 4 != 0) picks.push_back(k);
