@@ -270,8 +270,10 @@ struct RoundLines {
 // One round's search of its seeds (step 2). Each seed's lines are kept per seed and joined in
 // seed order, whatever the order the threads searched them in.
 struct SeedSearch {
-  SeedSearch(const std::vector<Seed>& round_seeds, CoveredFaces cover, bool keep_searches)
-      : seeds(round_seeds),
+  SeedSearch(int round_index, const std::vector<Seed>& round_seeds, CoveredFaces cover,
+             bool keep_searches)
+      : round(round_index),
+        seeds(round_seeds),
         covered(std::move(cover)),
         keep(keep_searches),
         per_seed(round_seeds.size()),
@@ -284,12 +286,15 @@ struct SeedSearch {
   // took in one with a line that may cover that much of Φ (the search pauses there).
   bool look(std::optional<double> nearly_all) {
     while (looked < seeds.size() && searched[looked]) {
-      const std::vector<LineCandidate>& ls = per_seed[looked++];
-      if (nearly_all &&
-          std::any_of(ls.begin(), ls.end(), [&](const LineCandidate& c) { return c.estimate >= *nearly_all; }))
-        return true;
+      const std::size_t s = looked++;
+      if (nearly_all && sweeps(s, *nearly_all)) return true;
     }
     return false;
+  }
+  // True when a line of seed `s` may cover `area` of Φ (its probe sweep's estimate).
+  bool sweeps(std::size_t s, double area) const {
+    return std::any_of(per_seed[s].begin(), per_seed[s].end(),
+                       [&](const LineCandidate& c) { return c.estimate >= area; });
   }
   // The lines of seeds [0, seed_count), best first.
   std::vector<LineCandidate> ranked(std::size_t seed_count) const {
@@ -300,6 +305,10 @@ struct SeedSearch {
     return lines;
   }
 
+  // "round N: " for the trace.
+  std::string traced() const { return "round " + std::to_string(round + 1) + ": "; }
+
+  const int round;
   const std::vector<Seed>& seeds;
   const CoveredFaces covered;  // empty in round 0, which searches without a cover
   const bool keep;             // searches are kept for later rounds (only those with a cover)
@@ -309,6 +318,9 @@ struct SeedSearch {
   std::vector<std::vector<FreeRunRecord>> runs;  // per seed, where kept
   std::vector<char> searched;                 // per seed
   std::size_t looked = 0;                     // seeds [0, looked) searched and looked at in order
+  // A seed searched has a line that may sweep over half of what pauses the search: the seeds
+  // left are searched one at a time (Decomposition::candidate_lines).
+  std::atomic<bool> one_sweep{false};
 };
 
 // One decomposition's state over its rounds (steps 1-4) and finishes (step 5): the pool of
@@ -361,8 +373,11 @@ class Decomposition {
   // again if the search goes on).
   bool search_seed(SeedSearch& r, std::size_t s, const std::atomic<bool>* stop);
   // Searches the seeds of `r` after `looked` not yet searched, one per thread, in seed order;
-  // with `nearly_all`, true when one of them paused the search.
+  // with `nearly_all`, true when one of them paused the search. Once `r.one_sweep` holds, one
+  // thread goes on taking seeds and the others help inside its searches.
   bool search_beside(SeedSearch& r, std::optional<double> nearly_all);
+  // Marks seed s of `r` searched, and notes where its lines hint at a part one sweep covers.
+  void mark_searched(SeedSearch& r, std::size_t s, std::optional<double> nearly_all) const;
   // Counts what `r` searched, and keeps its searches for later rounds.
   void record(SeedSearch& r);
   // Step 2's try of the candidates at the head of `lines` that may cover the target alone.
@@ -525,21 +540,61 @@ bool Decomposition::search_beside(SeedSearch& r, std::optional<double> nearly_al
   std::mutex looked_mutex;
   std::atomic<bool> pause{false};
   std::atomic<std::size_t> next{0};
+  std::atomic<int> taking{max_threads()};  // tasks that take seeds, or will
+  // Where the seeds' lines hint at a part one sweep covers and the search may still pause, a
+  // task leaves while another one goes on: its thread then runs the parallel loops of the
+  // searches left (the scheduler's threads take such work whenever they have none of their
+  // own), where a seed of its own would likely be stopped and thrown away once the seed that
+  // pauses the search ends.
+  const auto leave = [&] {
+    for (int n = taking.load(); n > 1;)
+      if (taking.compare_exchange_weak(n, n - 1)) return true;
+    return false;
+  };
   parallel_invoke_each(static_cast<std::size_t>(max_threads()), [&](std::size_t) {
     while (!pause) {
+      if (nearly_all && r.one_sweep && leave()) return;
       const std::size_t i = next++;
-      if (i >= pending.size()) return;
+      if (i >= pending.size()) break;
       const std::size_t s = pending[i];
       // Once a seed before it pauses the search, a seed still searched is stopped: the try
       // that follows gets every thread, and whether it ends the search or not, what the
       // stopped seed would give is the same when searched again.
-      if (!search_seed(r, s, nearly_all ? &pause : nullptr)) continue;
+      if (!search_seed(r, s, nearly_all ? &pause : nullptr)) {
+        if (o_.trace)
+          o_.trace(r.traced() + "seed " + std::to_string(s) + " stopped: a seed before it paused the search");
+        continue;
+      }
       const std::lock_guard<std::mutex> lock(looked_mutex);
-      r.searched[s] = 1;
+      mark_searched(r, s, nearly_all);
       if (!pause && r.look(nearly_all)) pause = true;
     }
+    --taking;
   });
   return pause;
+}
+
+// On a part one sweep covers, the line whose probe sweep passes over nearly all of it is
+// often not in the first seed, and seeds before it have lines that sweep much of it: on
+// exact cone and cylinder parts (the tests' and the scaling ladder's, at 1e-3 and 1e-4 of the
+// diagonal) 56–66% of the area that pauses the search, though at 1e-4 the first seed's may
+// sweep only 16–44%. A seed searched beside the one whose line pauses the search is stopped
+// and thrown away, while that one runs on one thread (the ladder's 256k-triangle cone: its
+// search 0.65 efficient). On parts that need several patches a seed's lines sweep less: at
+// most 46% on the four blade faces of tests/data, 50–55% on a few seeds of made-up faces
+// (tests/freeform_parts.py) and of the propeller blade, where the seeds after are then
+// searched one at a time, with every thread inside each, at a little cost in efficiency.
+// Hence the hint: a line that may sweep over half of it. Which seeds are searched, and what
+// each gives, do not change: only the threads' share of them.
+constexpr double kOneSweepHint = 0.5;
+
+void Decomposition::mark_searched(SeedSearch& r, std::size_t s, std::optional<double> nearly_all) const {
+  r.searched[s] = 1;
+  if (nearly_all && !r.one_sweep && r.sweeps(s, kOneSweepHint * *nearly_all)) {
+    r.one_sweep = true;
+    if (o_.trace)
+      o_.trace(r.traced() + "seed " + std::to_string(s) + " has a line that may sweep over half of the part");
+  }
 }
 
 void Decomposition::record(SeedSearch& r) {
@@ -557,29 +612,31 @@ RoundLines Decomposition::candidate_lines(const RoundBars& bars, const std::vect
   CoveredFaces covered = bars.round == 0 ? CoveredFaces{} : faces_of(mesh_, cover_.vertex_patch);
   // Round 0 sees no cover (and searches without it): only later rounds' searches are kept.
   const bool keep = o_.reuse_seeds && !covered.empty();
-  SeedSearch r(seeds, std::move(covered), keep);
+  SeedSearch r(bars.round, seeds, std::move(covered), keep);
   // A line that may cover nearly all of Φ is tried before the seeds after its own are
   // searched (DecomposeOptions::grow_early): the search pauses at the first seed, in seed
   // order, whose lines include one. Once, in a round: where that try leaves too much, one
   // patch rarely leaves less (a coarse mesh, a surface not quite one envelope), and each try
   // costs fits.
   RoundLines out;
-  bool may_pause = o_.grow_early, first_alone = false;
+  bool may_pause = o_.grow_early;
   const auto pause_at = [&]() -> std::optional<double> {
     return may_pause ? std::optional<double>(bars.nearly_all) : std::nullopt;
   };
   for (;;) {
     bool paused = r.look(pause_at());  // seeds searched past the last pause
-    if (!paused && !first_alone && !seeds.empty() && may_pause &&
-        cover_.covered_area <= cover_.total_area - bars.nearly_all) {
-      // While Φ is nearly all uncovered (in the first round), the first seed by itself,
-      // with every thread inside its search: on a part one sweep covers, it often has the
-      // line that ends the search, and a second seed searched beside it would be searched
-      // for nothing. Elsewhere this is one seed of some twenty with both threads inside
-      // instead of one thread each, at some cost in efficiency.
-      first_alone = true;
-      search_seed(r, 0, nullptr);
-      r.searched[0] = 1;
+    // While Φ is nearly all uncovered (in the first round), the first seed by itself, with
+    // every thread inside its search, and the next ones so while a line of those searched may
+    // sweep over half of Φ (kOneSweepHint): on a part one sweep covers, one of them often has
+    // the line that pauses the search, and a seed searched beside it would be searched for
+    // nothing. Elsewhere this is one seed of some twenty with both threads inside instead of
+    // one thread each, at some cost in efficiency.
+    while (!paused && may_pause && cover_.covered_area <= cover_.total_area - bars.nearly_all &&
+           r.looked < seeds.size() && !r.searched[r.looked] && (r.looked == 0 || r.one_sweep)) {
+      const std::size_t s = r.looked;
+      if (o_.trace) o_.trace(r.traced() + "seed " + std::to_string(s) + " searched alone");
+      search_seed(r, s, nullptr);
+      mark_searched(r, s, pause_at());
       paused = r.look(pause_at());
     }
     if (!paused) paused = search_beside(r, pause_at());

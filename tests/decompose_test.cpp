@@ -7,6 +7,7 @@
 
 #include <cstdio>
 #include <mutex>
+#include <optional>
 #include <set>
 #include <sstream>
 #include <string>
@@ -292,6 +293,52 @@ TEST(Decompose, APatchThatLeavesTooMuchLetsTheSearchGoOn) {
     EXPECT_EQ(early.candidates, every.candidates) << threads << " threads";
     EXPECT_EQ(early.grown, every.grown) << threads << " threads";
     expect_same_patches(early, every, std::to_string(threads) + " threads");
+  }
+}
+
+// On a part one sweep covers, seeds before the one whose line pauses the search have lines
+// that sweep over half of it. From the first such seed on, seeds are searched one at a time,
+// with every thread inside each, and none is searched beside the one that pauses the search
+// only to be stopped and thrown away. On the cone part at 1e-3 the first seed's lines already
+// sweep over half, and every seed up to the one that pauses is searched alone; at 1e-4 the
+// first seed's do not, and the second and third are searched side by side until either ends
+// (whichever does hands its thread to the other's search). The same patches whatever the
+// thread count.
+TEST(Decompose, APartOneSweepCoversSearchesNoSeedForNothing) {
+  const SynthResult part = testing::paper_part(PaperTool::cone, 121, 31);
+  const SurfaceIndex index(part.mesh);
+  for (double tolerance : {1e-3, 1e-4}) {
+    DecomposeOptions o = defaults(index, CutterKind::cone);
+    o.tolerance = tolerance * index.diagonal();
+    std::optional<DecomposeResult> one_thread;
+    for (int threads : {1, 2}) {
+      ThreadLimit limit(threads);
+      int alone = 0, stopped = 0, hinted = 0, paused_after = -1;
+      std::mutex mutex;
+      o.trace = [&](const std::string& line) {
+        const std::lock_guard<std::mutex> lock(mutex);
+        const auto has = [&](const char* s) { return line.find(s) != std::string::npos; };
+        if (line.rfind("round 1: seed ", 0) != 0) {
+          if (line.rfind("round 1 paused after seed ", 0) == 0) paused_after = std::stoi(line.substr(26));
+          return;
+        }
+        alone += has(" searched alone");
+        stopped += has(" stopped");
+        hinted += has(" may sweep over half");
+      };
+      const DecomposeResult r = decompose(index, o);
+      const std::string what = std::to_string(tolerance) + ", " + std::to_string(threads) + " threads";
+      report(("cone 121x31, " + what).c_str(), r, index.diagonal());
+      EXPECT_EQ(paused_after, 2) << what;
+      EXPECT_EQ(stopped, 0) << what;
+      EXPECT_EQ(hinted, 1) << what;
+      EXPECT_EQ(alone, tolerance > 5e-4 ? 3 : 1) << what;
+      EXPECT_GE(r.coverage, 1.0 - o.min_round_gain) << what;
+      if (one_thread)
+        expect_same_patches(*one_thread, r, what);
+      else
+        one_thread = r;
+    }
   }
 }
 
