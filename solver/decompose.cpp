@@ -581,9 +581,10 @@ bool Decomposition::search_beside(SeedSearch& r, std::optional<double> nearly_al
 // sweep only 16–44%. A seed searched beside the one whose line pauses the search is stopped
 // and thrown away, while that one runs on one thread (the ladder's 256k-triangle cone: its
 // search 0.65 efficient). On parts that need several patches a seed's lines sweep less: at
-// most 46% on the four blade faces of tests/data, 50–55% on a few seeds of made-up faces
-// (tests/freeform_parts.py) and of the propeller blade, where the seeds after are then
-// searched one at a time, with every thread inside each, at a little cost in efficiency.
+// most 46% on the four blade faces of tests/data (every seed of their first round), but
+// 50–58% on a few seeds of half the made-up faces (tests/freeform_parts.py) and 54–63% on
+// the propeller blade's: there the seeds after are searched one at a time, with every
+// thread inside each, at a little cost in efficiency.
 // Hence the hint: a line that may sweep over half of it. Which seeds are searched, and what
 // each gives, do not change: only the threads' share of them.
 constexpr double kOneSweepHint = 0.5;
