@@ -627,7 +627,7 @@ RoundLines Decomposition::candidate_lines(const RoundBars& bars, const std::vect
   for (;;) {
     bool paused = r.look(pause_at());  // seeds searched past the last pause
     // While Φ is nearly all uncovered (in the first round), the first seed by itself, with
-    // every thread inside its search, and the next ones so while a line of those searched may
+    // every thread inside its search, and the next ones too once a line of those searched may
     // sweep over half of Φ (kOneSweepHint): on a part one sweep covers, one of them often has
     // the line that pauses the search, and a seed searched beside it would be searched for
     // nothing. Elsewhere this is one seed of some twenty with both threads inside instead of

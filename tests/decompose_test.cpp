@@ -318,10 +318,9 @@ TEST(Decompose, APartOneSweepCoversSearchesNoSeedForNothing) {
       o.trace = [&](const std::string& line) {
         const std::lock_guard<std::mutex> lock(mutex);
         const auto has = [&](const char* s) { return line.find(s) != std::string::npos; };
-        if (line.rfind("round 1: seed ", 0) != 0) {
-          if (line.rfind("round 1 paused after seed ", 0) == 0) paused_after = std::stoi(line.substr(26));
-          return;
-        }
+        const std::string paused = "round 1 paused after seed ";
+        if (line.rfind(paused, 0) == 0) paused_after = std::stoi(line.substr(paused.size()));
+        if (line.rfind("round 1: seed ", 0) != 0) return;
         alone += has(" searched alone");
         stopped += has(" stopped");
         hinted += has(" may sweep over half");
