@@ -288,7 +288,7 @@ struct SurfaceIndex::Impl {
   Buffer<Corners> leaf_corners;             // kBoxTree: per position of the leaf order, contiguous
   Buffer<std::int32_t> face_position;       // kBoxTree: face → position (tree.order() inverts it)
   Buffer<LeafPack> packs;                   // kBoxTree: per leaf of tree.leaves()
-  double reach = kInf;                      // kCells: the farthest a query may look
+  double reach = kInf;                      // within_reach's: the farthest a query may look
   CellGrid cells;                           // kCells: over the faces' boxes grown by reach
   Buffer<std::uint8_t> edge_boundary;       // per face, bit k: edge (k, k+1 mod 3) is a boundary
   std::vector<std::uint8_t> vertex_boundary;
@@ -693,15 +693,31 @@ ClosestPoint SurfaceIndex::Impl::query_once(const Vec3& p, int hint_face, double
   return out;
 }
 
-SurfaceIndex::SurfaceIndex(const Mesh& mesh, QueryEngine engine) : SurfaceIndex(mesh, engine, kInf) {}
+SurfaceIndex::SurfaceIndex(const Mesh& mesh, QueryEngine engine) : SurfaceIndex(mesh, engine, kInf, 0) {}
 
-SurfaceIndex SurfaceIndex::within_reach(Mesh mesh, double reach) {
+SurfaceIndex SurfaceIndex::within_reach(Mesh mesh, double reach, std::size_t queries) {
   if (!(reach > 0.0) || !std::isfinite(reach))
     throw std::invalid_argument("SurfaceIndex::within_reach: the reach must be positive and finite");
-  return SurfaceIndex(std::move(mesh), QueryEngine::kCells, reach);
+  return SurfaceIndex(std::move(mesh), QueryEngine::kCells, reach, queries);
 }
 
-SurfaceIndex::SurfaceIndex(Mesh mesh_given, QueryEngine engine, double reach)
+namespace {
+// Whether `queries` bounded queries cost more on a grid of cells listing `entries` faces in
+// `cells` cells than on a box tree over `faces` faces, its build included. Measured on Ω's
+// indices of the faces of tests/data and of the 1M-triangle cone (one thread, per face and
+// per query, in µs): the cells' build 0.10–0.11 and a query 0.26 plus 0.0103 per face its
+// cell lists (16.7 faces on the faces' Ω, 394 on the 1M cone's finish, whose vertex band is
+// ten tolerances wide over faces a tenth of that); the tree's build 0.45–0.48 and a query
+// 0.45–0.58, whatever the reach. The tree wins where Q (items − 28) > 35 F; the rule asks for
+// twice that on both sides, the mean over the occupied cells standing for the cells queried.
+bool tree_is_cheaper(std::size_t queries, std::size_t faces, std::size_t entries, std::size_t cells) {
+  if (queries == 0 || cells == 0) return false;
+  const double items = static_cast<double>(entries) / static_cast<double>(cells);
+  return static_cast<double>(queries) * (items - 32.0) > 64.0 * static_cast<double>(faces);
+}
+}  // namespace
+
+SurfaceIndex::SurfaceIndex(Mesh mesh_given, QueryEngine engine, double reach, std::size_t queries)
     : impl_(std::make_unique<Impl>()) {
   Impl& m = *impl_;
   m.engine = engine;
@@ -740,6 +756,11 @@ SurfaceIndex::SurfaceIndex(Mesh mesh_given, QueryEngine engine, double reach)
       }, 4096);
       m.cells = CellGrid(lo, hi);
     });
+    if (tree_is_cheaper(queries, static_cast<std::size_t>(nf), m.cells.entries(), m.cells.cells())) {
+      m.engine = QueryEngine::kBoxTree;
+      m.cells = CellGrid();
+      m.build_tree(corner_table(mesh), 1e-12 * scale);
+    }
     return;
   }
   // The boundary (from the sorted edges) and the rest (the frame, the corners and the search
@@ -897,14 +918,14 @@ bool SurfaceIndex::is_boundary_vertex(int v) const {
 }
 
 namespace {
-void require_unbounded(QueryEngine engine) {
-  if (engine == QueryEngine::kCells)
+void require_unbounded(double reach) {
+  if (reach < kInf)
     throw std::logic_error("SurfaceIndex: an index made by within_reach answers bounded queries only");
 }
 }  // namespace
 
 ClosestPoint SurfaceIndex::closest_point(const Vec3& p, int hint_face) const {
-  require_unbounded(impl_->engine);
+  require_unbounded(impl_->reach);
   return impl_->query(p, hint_face);
 }
 
@@ -930,7 +951,7 @@ std::vector<ClosestPoint> SurfaceIndex::Impl::batch(PointsRef queries, std::span
 
 std::vector<ClosestPoint> SurfaceIndex::closest_points(PointsRef queries,
                                                        std::span<const int> hints) const {
-  require_unbounded(impl_->engine);
+  require_unbounded(impl_->reach);
   return impl_->batch(queries, hints, kInf, nullptr);
 }
 
@@ -950,7 +971,7 @@ void SurfaceIndex::closest_points_serial(PointsRef queries, std::span<const int>
                                          std::span<ClosestPoint> out) const {
   assert(hints.empty() || hints.size() == static_cast<std::size_t>(queries.rows()));
   assert(out.size() == static_cast<std::size_t>(queries.rows()));
-  require_unbounded(impl_->engine);
+  require_unbounded(impl_->reach);
   const std::size_t count = std::min(out.size(), static_cast<std::size_t>(queries.rows()));
   const Impl& m = *impl_;
   int previous = -1;

@@ -49,7 +49,11 @@ class SurfaceIndex {
   // An index for closest_points_within with max_distance ≤ reach (> 0, finite) only
   // (QueryEngine::kCells), with the same answers as the box tree's; any other query throws
   // std::logic_error. The index keeps `mesh` (moved in, where the caller is done with it).
-  static SurfaceIndex within_reach(Mesh mesh, double reach);
+  // `queries`: about how many queries it is for (0: few). Where that many would cost more on
+  // the cells than a box tree's build and queries (a reach many faces wide, so that a cell
+  // lists hundreds of faces, and queries several times the faces), it searches a box tree
+  // instead (engine() says which): the same answers, and still bounded queries only.
+  static SurfaceIndex within_reach(Mesh mesh, double reach, std::size_t queries = 0);
   ~SurfaceIndex();
   SurfaceIndex(SurfaceIndex&&) noexcept;
   SurfaceIndex& operator=(SurfaceIndex&&) noexcept;
@@ -95,7 +99,7 @@ class SurfaceIndex {
   void record_queries(std::vector<RecordedQuery>* log);
 
  private:
-  SurfaceIndex(Mesh mesh, QueryEngine engine, double reach);
+  SurfaceIndex(Mesh mesh, QueryEngine engine, double reach, std::size_t queries);
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };

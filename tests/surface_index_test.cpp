@@ -544,6 +544,56 @@ TEST(SurfaceIndex, CellsAnswerBoundedQueriesAsTheBoxTree) {
   }
 }
 
+// within_reach told of many queries over faces far smaller than the reach (a cell would list
+// hundreds of faces) searches a box tree instead, with the cells' answers bit for bit, and
+// still answers bounded queries only; told of few queries, or of a reach a tenth of a face
+// wide, it keeps the cells. A 120 × 120 grid (28,800 faces, 0.05 wide): the reach of 0.5 (a
+// vertex band's ten tolerances over a fine Ω) against 0.005.
+TEST(SurfaceIndex, WithinReachSearchesATreeWhereCellsWouldListHundredsOfFaces) {
+  const Mesh m = make_grid(
+      120, 120, 6.0, 6.0, [](double x, double y) { return 0.3 * std::sin(x) * std::cos(0.8 * y); }, 0.3, 5);
+  const std::size_t F = static_cast<std::size_t>(m.face_count());
+  // Points near the surface, in the order of its vertices (as Φ's vertices are asked), and
+  // points around it.
+  Points Q(static_cast<Eigen::Index>(m.V.rows()) + 200, 3);
+  std::mt19937 rng(9);
+  std::uniform_real_distribution<double> u(-1.0, 1.0);
+  for (Eigen::Index v = 0; v < m.V.rows(); ++v) Q.row(v) = m.V.row(v) + 0.02 * Eigen::RowVector3d(u(rng), u(rng), u(rng));
+  Q.bottomRows(200) = make_queries(m, 200, 13);
+  std::vector<char> mask(F);
+  for (std::size_t f = 0; f < F; ++f) mask[f] = (f * 7919) % 5 != 0;
+  const SurfaceIndex few = SurfaceIndex::within_reach(m, 0.5, 100);
+  const SurfaceIndex many = SurfaceIndex::within_reach(m, 0.5, 4 * F);
+  const SurfaceIndex narrow = SurfaceIndex::within_reach(m, 0.005, 4 * F);
+  EXPECT_EQ(few.engine(), QueryEngine::kCells);
+  EXPECT_EQ(many.engine(), QueryEngine::kBoxTree);
+  EXPECT_EQ(narrow.engine(), QueryEngine::kCells);
+  int found = 0;
+  for (const double bound : {0.5, 0.005, 0.0})
+    for (const bool masked : {false, true}) {
+      SCOPED_TRACE(::testing::Message() << "bound " << bound << (masked ? ", masked" : ""));
+      const std::span<const char> fm = masked ? std::span<const char>(mask) : std::span<const char>{};
+      const std::vector<ClosestPoint> a = few.closest_points_within(Q, bound, fm);
+      const std::vector<ClosestPoint> b = many.closest_points_within(Q, bound, fm);
+      ASSERT_EQ(a.size(), b.size());
+      for (std::size_t i = 0; i < a.size(); ++i) {
+        SCOPED_TRACE(i);
+        expect_same(a[i], b[i]);
+        found += a[i].face >= 0;
+      }
+      if (bound <= 0.005) {
+        const std::vector<ClosestPoint> c = narrow.closest_points_within(Q, bound, fm);
+        for (std::size_t i = 0; i < a.size(); ++i) expect_same(c[i], a[i]);
+      }
+    }
+  EXPECT_GT(found, 2 * m.V.rows());  // every point near the surface, within 0.5
+  EXPECT_THROW(many.closest_point(Vec3::Zero()), std::logic_error);
+  EXPECT_THROW(many.closest_points(Q.topRows(8)), std::logic_error);
+  std::vector<ClosestPoint> out(8);
+  EXPECT_THROW(many.closest_points_serial(Q.topRows(8), {}, out), std::logic_error);
+  EXPECT_THROW(many.closest_points_within(Q, 0.6), std::logic_error);
+}
+
 TEST(SurfaceIndex, CellsRefuseQueriesBeyondTheirReach) {
   const Mesh m = perturbed_grid(103);
   const SurfaceIndex cells = SurfaceIndex::within_reach(m, 0.1);
