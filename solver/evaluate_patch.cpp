@@ -323,7 +323,8 @@ constexpr double kUnderCosine = 0.8660254037844386;
 // `reach` (a few tolerances), so the index is a grid of cells (QueryEngine::kCells): a box
 // tree took longer to build than all its queries took to answer. Not on a fine Φ, where the
 // final evaluation asks as many queries as Φ has vertices near Ω: SurfaceIndex::within_reach
-// then searches a box tree (on the 1M-triangle cone, 8.4 s of queries became 0.9 s).
+// then searches a box tree (on the 1M-triangle cone at one thread, the finish's 8.5 s became
+// 0.9 s).
 class OmegaSurface {
  public:
   OmegaSurface(const ErrorGrid& grid, double reach) : mesh_(envelope_mesh(grid, nullptr)), reach_(reach) {}
