@@ -761,7 +761,7 @@ SurfaceIndex::SurfaceIndex(Mesh mesh_given, QueryEngine engine, double reach, st
     if (tree_is_cheaper(queries, static_cast<std::size_t>(nf), m.cells.entries(), m.cells.cells())) {
       m.engine = QueryEngine::kBoxTree;
       m.cells = CellGrid();
-      m.build_tree(corner_table(mesh), 1e-12 * scale);
+      m.build_search(corner_table(mesh), 1e-12 * scale);
     }
     return;
   }
