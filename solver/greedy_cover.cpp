@@ -43,14 +43,25 @@ bool full(const Cover& c, const CoverOptions& o) {
 // greedy_cover's picks, with `crew` for the sums.
 void greedy_on(Crew& crew, const std::vector<Patch>& pool, const VecX& area, const CoverOptions& o, Cover* c) {
   c->used.resize(pool.size(), 0);
-  std::vector<double> gains(pool.size(), 0.0);  // per pool entry, of this pick
+  // Per pool entry, of this pick: its gain, and the covered area once it is picked: the
+  // cover's area plus the entry's new vertices' areas, added one by one in the entry's order,
+  // as the update after a pick added them (the same value, bit for bit; a patch lists each
+  // covered vertex once). Each entry sums both at once, in parallel, and the update after the
+  // pick only marks its vertices. Made there, that sum was a chain of dependent additions
+  // over thousands of vertices, on one thread while the others waited: on HECC a's first
+  // cover, 43 µs of greedy's 240 at one thread, and of its 137 at two.
+  std::vector<double> gains(pool.size(), 0.0), after(pool.size(), 0.0);
   for (int picked = 0; o.max_picks <= 0 || picked < o.max_picks; ++picked) {
     const int id = static_cast<int>(c->picks.size());
     if (full(*c, o)) break;
     crew.parallel_for(0, pool.size(), [&](std::size_t b, std::size_t e) {
-      for (std::size_t k = b; k < e; ++k)
-        if (!c->used[k])
-          gains[k] = area_where(pool[k].covered_vertices, area, [&](std::size_t v) { return c->vertex_patch[v] < 0; });
+      for (std::size_t k = b; k < e; ++k) {
+        if (c->used[k]) continue;
+        double gain = 0.0, sum = c->covered_area;
+        for (int v : pool[k].covered_vertices)
+          if (c->vertex_patch[static_cast<std::size_t>(v)] < 0) gain += area(v), sum += area(v);
+        gains[k] = gain, after[k] = sum;
+      }
     }, kGrain);
     int pick = -1;
     double best_gain = 0.0;
@@ -63,8 +74,11 @@ void greedy_on(Crew& crew, const std::vector<Patch>& pool, const VecX& area, con
     }
     if (pick < 0 || best_gain < o.min_gain * c->total_area) break;
     c->used[static_cast<std::size_t>(pick)] = 1;
-    for (int v : pool[static_cast<std::size_t>(pick)].covered_vertices)
-      if (c->vertex_patch[static_cast<std::size_t>(v)] < 0) c->vertex_patch[static_cast<std::size_t>(v)] = id, c->covered_area += area(v);
+    for (int v : pool[static_cast<std::size_t>(pick)].covered_vertices) {
+      int& owner = c->vertex_patch[static_cast<std::size_t>(v)];
+      owner = owner < 0 ? id : owner;
+    }
+    c->covered_area = after[static_cast<std::size_t>(pick)];
     c->picks.push_back(pick);
     c->curve.push_back(c->fraction());
   }
