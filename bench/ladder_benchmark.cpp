@@ -439,7 +439,7 @@ void bench_command(benchmark::State& state, Rung r, int threads) {
                                    "--threads", std::to_string(threads), "--tolerance-rel", tolerance};
   if (!tools.empty()) args.insert(args.end(), {"--tool", tools});
   // GNU time runs flank from its own, small process and writes flank's peak resident KB
-  // and minor and major page faults to `usage`.
+  // and minor and major page faults to `usage_file`.
   const std::filesystem::path usage_file = scratch_dir() / "usage.txt";
   const bool measured = access(kGnuTime, X_OK) == 0;
   if (measured) args.insert(args.begin(), {kGnuTime, "-f", "%M %R %F", "-o", usage_file.string()});
