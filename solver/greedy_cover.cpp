@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <limits>
 #include <numeric>
+#include <span>
 
 #include "kernels/parallel.h"
 
@@ -12,9 +13,19 @@ namespace flank {
 // each entry's sum is computed on its own, in parallel, into per-entry storage, and the choice
 // is made after, serially, in the order and with the tie rules the serial loops had: the
 // result is the same bit for bit whatever the thread count. An entry sums a patch's covered
-// vertices, a few thousand: a few microseconds, hence small grains.
+// vertices, a few thousand: a few microseconds, hence small grains. A long list is summed in
+// blocks (kCoverBlock), each a task of its own.
 namespace {
 constexpr std::size_t kGrain = 2;
+
+// The blocks of a list of n vertices: at least one.
+std::size_t blocks_of(std::size_t n) { return std::max<std::size_t>(1, (n + kCoverBlock - 1) / kCoverBlock); }
+
+// Block b of `list`.
+std::span<const int> block(const std::vector<int>& list, std::size_t b) {
+  const std::size_t first = b * kCoverBlock;
+  return std::span<const int>(list).subspan(first, std::min(kCoverBlock, list.size() - first));
+}
 
 // Σ area(v) over v in `vertices` where keep(v), in the list's order.
 template <class Keep>
@@ -26,10 +37,21 @@ double area_where(const std::vector<int>& vertices, const VecX& area, Keep&& kee
 }
 }  // namespace
 
+namespace {
+// Makes `c` the empty cover of Φ, keeping its storage.
+void clear_cover(const VecX& area, Cover& c) {
+  c.vertex_patch.assign(static_cast<std::size_t>(area.size()), -1);
+  c.used.clear();
+  c.picks.clear();
+  c.curve.clear();
+  c.covered_area = 0.0;
+  c.total_area = area.sum();
+}
+}  // namespace
+
 Cover empty_cover(const VecX& area) {
   Cover c;
-  c.vertex_patch.assign(static_cast<std::size_t>(area.size()), -1);
-  c.total_area = area.sum();
+  clear_cover(area, c);
   return c;
 }
 
@@ -43,60 +65,83 @@ bool full(const Cover& c, const CoverOptions& o) {
 // greedy_cover's picks, with `crew` for the sums.
 void greedy_on(Crew& crew, const std::vector<Patch>& pool, const VecX& area, const CoverOptions& o, Cover* c) {
   c->used.resize(pool.size(), 0);
-  // Per pool entry, of this pick: its gain, and the covered area once it is picked: the
-  // cover's area plus the entry's new vertices' areas, added one by one in the entry's order,
-  // as the update after a pick added them (the same value, bit for bit; a patch lists each
-  // covered vertex once). Each entry sums both at once, in parallel, and the update after the
-  // pick only marks its vertices. Made there, that sum was a chain of dependent additions
-  // over thousands of vertices, on one thread while the others waited: on HECC a's first
-  // cover, 43 µs of greedy's 240 at one thread, and of its 137 at two.
-  std::vector<double> gains(pool.size(), 0.0), after(pool.size(), 0.0);
+  // One task per block of each entry's list: entry k's are first[k] .. first[k + 1) - 1.
+  std::vector<std::size_t> first(pool.size() + 1, 0);
+  for (std::size_t k = 0; k < pool.size(); ++k)
+    first[k + 1] = first[k] + blocks_of(pool[k].covered_vertices.size());
+  std::vector<std::size_t> entry(first.back());
+  for (std::size_t k = 0; k < pool.size(); ++k)
+    for (std::size_t t = first[k]; t < first[k + 1]; ++t) entry[t] = k;
+  // Per block, of this pick: its new vertices' area, from zero; and per entry, its first
+  // block's new areas added one by one to the cover's area, as the cover's sum after the pick
+  // starts (kCoverBlock). An entry's gain and its covered area once picked follow from these
+  // in a few additions, and the update after the pick only marks its vertices. (Summed after
+  // the pick, the covered area was a chain of dependent additions over thousands of vertices
+  // on one thread while the others waited: on HECC a's first cover, 43 µs of greedy's 240 at
+  // one thread, and of its 137 at two.)
+  std::vector<double> part(first.back(), 0.0), lead(pool.size(), 0.0);
   for (int picked = 0; o.max_picks <= 0 || picked < o.max_picks; ++picked) {
     const int id = static_cast<int>(c->picks.size());
     if (full(*c, o)) break;
-    crew.parallel_for(0, pool.size(), [&](std::size_t b, std::size_t e) {
-      for (std::size_t k = b; k < e; ++k) {
+    crew.parallel_for(0, first.back(), [&](std::size_t b, std::size_t e) {
+      for (std::size_t t = b; t < e; ++t) {
+        const std::size_t k = entry[t];
         if (c->used[k]) continue;
         double gain = 0.0, sum = c->covered_area;
-        for (int v : pool[k].covered_vertices)
+        for (int v : block(pool[k].covered_vertices, t - first[k]))
           if (c->vertex_patch[static_cast<std::size_t>(v)] < 0) gain += area(v), sum += area(v);
-        gains[k] = gain, after[k] = sum;
+        part[t] = gain;
+        if (t == first[k]) lead[k] = sum;
       }
     }, kGrain);
     int pick = -1;
     double best_gain = 0.0;
     for (std::size_t k = 0; k < pool.size(); ++k) {
       if (c->used[k]) continue;
-      const double gain = gains[k];
+      double gain = part[first[k]];
+      for (std::size_t t = first[k] + 1; t < first[k + 1]; ++t) gain += part[t];
       const bool better = pick < 0 || gain > best_gain ||
                           (gain == best_gain && pool[k].error.max < pool[static_cast<std::size_t>(pick)].error.max);
       if (better) pick = static_cast<int>(k), best_gain = gain;
     }
     if (pick < 0 || best_gain < o.min_gain * c->total_area) break;
-    c->used[static_cast<std::size_t>(pick)] = 1;
-    for (int v : pool[static_cast<std::size_t>(pick)].covered_vertices) {
-      int& owner = c->vertex_patch[static_cast<std::size_t>(v)];
-      owner = owner < 0 ? id : owner;
-    }
-    c->covered_area = after[static_cast<std::size_t>(pick)];
+    const auto k = static_cast<std::size_t>(pick);
+    c->used[k] = 1;
+    // A patch lists each vertex once: its blocks mark different vertices.
+    const auto mark = [&](std::size_t b, std::size_t e) {
+      for (std::size_t i = b; i < e; ++i)
+        for (int v : block(pool[k].covered_vertices, i)) {
+          int& owner = c->vertex_patch[static_cast<std::size_t>(v)];
+          owner = owner < 0 ? id : owner;
+        }
+    };
+    const std::size_t blocks = first[k + 1] - first[k];
+    if (blocks > 1)
+      crew.parallel_for(0, blocks, mark, 1);
+    else
+      mark(0, 1);
+    double after = lead[k];
+    for (std::size_t t = first[k] + 1; t < first[k + 1]; ++t) after += part[t];
+    c->covered_area = after;
     c->picks.push_back(pick);
     c->curve.push_back(c->fraction());
   }
 }
 
-Cover order_on(Crew& crew, const std::vector<Patch>& pool, const VecX& area, std::vector<int> picks);
+void order_on(Crew& crew, const std::vector<Patch>& pool, const VecX& area, std::vector<int> picks, Cover* c);
 
-// improve_cover's swaps and rebuild, with `crew` for the sums.
-void improve_on(Crew& crew, const std::vector<Patch>& pool, const VecX& area, int max_swaps, Cover* c) {
+// improve_cover's swaps of `picks` (pool indices, the cover's picks), with `crew` for the
+// sums.
+void swap_picks(Crew& crew, const std::vector<Patch>& pool, const VecX& area, int max_swaps, double total_area,
+                std::vector<int>& picks) {
   const std::size_t V = static_cast<std::size_t>(area.size());
   std::vector<int> count(V, 0);  // picked patches covering each vertex
   std::vector<int> sole(V, -1);  // where count is 1: the index into `picks` of that patch
   std::vector<char> picked(pool.size(), 0);
-  for (int k : c->picks) {
+  for (int k : picks) {
     picked[static_cast<std::size_t>(k)] = 1;
     for (int v : pool[static_cast<std::size_t>(k)].covered_vertices) ++count[static_cast<std::size_t>(v)];
   }
-  std::vector<int> picks = c->picks;
   const std::size_t P = picks.size();
   // A swap of pick i (out) for entry j (in) gains the area of j's vertices that no pick
   // covers, or that i alone covers, and loses the area that i alone covers: one pass over j's
@@ -107,7 +152,7 @@ void improve_on(Crew& crew, const std::vector<Patch>& pool, const VecX& area, in
   // patch lists each covered vertex once (evaluate_patch).
   std::vector<double> loss(P), gain(pool.size() * P);  // gain: row j, column i
   for (int swap = 0; swap < max_swaps; ++swap) {
-    const double least = 1e-9 * c->total_area;  // a swap must gain more than rounding
+    const double least = 1e-9 * total_area;  // a swap must gain more than rounding
     // Per pick, what it alone covers: its loss, and those vertices marked as its own (a
     // vertex covered once is one pick's only: no two tasks write it).
     crew.parallel_for(0, P, [&](std::size_t b, std::size_t e) {
@@ -154,7 +199,14 @@ void improve_on(Crew& crew, const std::vector<Patch>& pool, const VecX& area, in
     picked[static_cast<std::size_t>(best_in)] = 1;
     picks[static_cast<std::size_t>(best_out)] = best_in;
   }
-  *c = order_on(crew, pool, area, picks);
+}
+
+// improve_cover's swaps and rebuild, with `crew` for the sums.
+void improve_on(Crew& crew, const std::vector<Patch>& pool, const VecX& area, int max_swaps, Cover* c) {
+  std::vector<int> picks = c->picks;
+  // With every entry picked (the pool of a part one patch covers) there is none to swap in.
+  if (picks.size() < pool.size()) swap_picks(crew, pool, area, max_swaps, c->total_area, picks);
+  order_on(crew, pool, area, picks, c);
 }
 }  // namespace
 
@@ -178,20 +230,40 @@ void extend_cover(const std::vector<Patch>& pool, const VecX& area, const CoverO
 }
 
 namespace {
-// The cover of `order` (pool indices) taken in that order.
-Cover cover_in_order(const std::vector<Patch>& pool, const VecX& area, const std::vector<int>& order) {
-  Cover c = empty_cover(area);
+// The cover of `order` (pool indices) taken in that order, made in `c` (whatever it held: its
+// storage is reused); with `crew`, each pick's blocks (kCoverBlock) are marked and summed in
+// parallel.
+void cover_in_order(const std::vector<Patch>& pool, const VecX& area, const std::vector<int>& order, Cover& c,
+                    Crew* crew = nullptr) {
+  clear_cover(area, c);
   c.used.assign(pool.size(), 0);
+  std::vector<double> part;
   for (int k : order) {
     const int id = static_cast<int>(c.picks.size());
-    for (int v : pool[static_cast<std::size_t>(k)].covered_vertices)
-      if (c.vertex_patch[static_cast<std::size_t>(v)] < 0)
-        c.vertex_patch[static_cast<std::size_t>(v)] = id, c.covered_area += area(v);
+    const std::vector<int>& list = pool[static_cast<std::size_t>(k)].covered_vertices;
+    // Block 0 adds to the covered area, the others sum from zero; a patch lists each vertex
+    // once, so the blocks mark different vertices.
+    part.assign(blocks_of(list.size()), 0.0);
+    const auto add = [&](std::size_t b, std::size_t e) {
+      for (std::size_t i = b; i < e; ++i) {
+        double sum = i == 0 ? c.covered_area : 0.0;
+        for (int v : block(list, i))
+          if (c.vertex_patch[static_cast<std::size_t>(v)] < 0)
+            c.vertex_patch[static_cast<std::size_t>(v)] = id, sum += area(v);
+        part[i] = sum;
+      }
+    };
+    if (crew && part.size() > 1)
+      crew->parallel_for(0, part.size(), add, 1);
+    else
+      add(0, part.size());
+    double sum = part[0];
+    for (std::size_t i = 1; i < part.size(); ++i) sum += part[i];
+    c.covered_area = sum;
     c.used[static_cast<std::size_t>(k)] = 1;
     c.picks.push_back(k);
     c.curve.push_back(c.fraction());
   }
-  return c;
 }
 }  // namespace
 
@@ -271,28 +343,36 @@ std::vector<int> elimination_order(const std::vector<Patch>& pool, const VecX& a
 }
 
 namespace {
-Cover order_on(Crew& crew, const std::vector<Patch>& pool, const VecX& area, std::vector<int> picks) {
+// order_cover's cover of `picks`, made in `c` (its storage reused: on a part of 129,000
+// vertices a fresh cover's first touch of its pages cost more than the sums).
+void order_on(Crew& crew, const std::vector<Patch>& pool, const VecX& area, std::vector<int> picks, Cover* c) {
   std::sort(picks.begin(), picks.end());
+  // One pick has one order: its cover is made once, its blocks shared out.
+  if (picks.size() <= 1) {
+    cover_in_order(pool, area, picks, *c, &crew);
+    return;
+  }
   // The two orders and their covers are independent: one task each. (Their steps, a few
   // sums each over a dozen picks, are too short to split: a fork per step cost more than
   // it saved.)
-  Cover a, b;
+  Cover& a = *c;
+  Cover b;
   crew.parallel_for(0, 2, [&](std::size_t task, std::size_t) {
     if (task == 0)
-      a = cover_in_order(pool, area, greedy_order(pool, area, picks));
+      cover_in_order(pool, area, greedy_order(pool, area, picks), a);
     else
-      b = cover_in_order(pool, area, elimination_order(pool, area, picks));
+      cover_in_order(pool, area, elimination_order(pool, area, picks), b);
   }, 1);
   double sa = 0.0, sb = 0.0;
   for (double x : a.curve) sa += x;
   for (double x : b.curve) sb += x;
-  return sb > sa * (1.0 + 1e-12) ? b : a;
+  if (sb > sa * (1.0 + 1e-12)) a = std::move(b);
 }
 }  // namespace
 
 Cover order_cover(const std::vector<Patch>& pool, const VecX& area, std::vector<int> picks) {
   Cover out;
-  with_crew([&](Crew& crew) { out = order_on(crew, pool, area, std::move(picks)); });
+  with_crew([&](Crew& crew) { order_on(crew, pool, area, std::move(picks), &out); });
   return out;
 }
 

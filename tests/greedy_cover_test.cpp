@@ -5,6 +5,7 @@
 #include <gtest/gtest.h>
 
 #include <algorithm>
+#include <cmath>
 #include <cstdint>
 #include <cstdio>
 #include <random>
@@ -53,11 +54,22 @@ double union_area(const std::vector<Patch>& pool, const std::vector<int>& picks,
   return sum;
 }
 
+// Σ area(v) over `list` where keep(v), summed as the cover sums (kCoverBlock): the first
+// block's terms added one by one to `start`, each later block's from zero and added after.
+template <class Keep>
+double block_sum(const std::vector<int>& list, double start, const VecX& area, Keep keep) {
+  double total = start;
+  for (std::size_t b = 0; b < list.size(); b += kCoverBlock) {
+    double sum = b == 0 ? start : 0.0;
+    for (std::size_t i = b; i < std::min(list.size(), b + kCoverBlock); ++i)
+      if (keep(list[i])) sum += area(list[i]);
+    total = b == 0 ? sum : total + sum;
+  }
+  return total;
+}
+
 double gain_over(const Patch& p, const std::vector<char>& covered, const VecX& area) {
-  double g = 0.0;
-  for (int v : p.covered_vertices)
-    if (!covered[static_cast<std::size_t>(v)]) g += area(v);
-  return g;
+  return block_sum(p.covered_vertices, 0.0, area, [&](int v) { return !covered[static_cast<std::size_t>(v)]; });
 }
 
 // Everything a Cover states about itself, recomputed from its picks: vertex_patch names the
@@ -97,14 +109,15 @@ void expect_cover_consistent(const std::vector<Patch>& pool, const VecX& area, c
       }
     }
     used[static_cast<std::size_t>(pick)] = 1;
-    for (int v : pool[static_cast<std::size_t>(pick)].covered_vertices)
+    const std::vector<int>& list = pool[static_cast<std::size_t>(pick)].covered_vertices;
+    covered_area = block_sum(list, covered_area, area, [&](int v) { return !covered[static_cast<std::size_t>(v)]; });
+    for (int v : list)
       if (!covered[static_cast<std::size_t>(v)]) {
         covered[static_cast<std::size_t>(v)] = 1;
         first[static_cast<std::size_t>(v)] = static_cast<int>(k);
-        covered_area += area(v);
       }
     // Exactly: the cover sums the same terms in the same order (each new vertex's area, pick
-    // after pick, in each patch's order), however its loops share out the work.
+    // after pick, in each patch's order and blocks), however its loops share out the work.
     EXPECT_EQ(c.curve[k], covered_area / area.sum()) << "pick " << k;
     if (k > 0) {
       EXPECT_GE(c.curve[k], c.curve[k - 1]);
@@ -114,6 +127,18 @@ void expect_cover_consistent(const std::vector<Patch>& pool, const VecX& area, c
   EXPECT_EQ(c.covered_area, covered_area);
   ASSERT_EQ(c.used.size(), pool.size());
   for (std::size_t q = 0; q < pool.size(); ++q) EXPECT_EQ(c.used[q] != 0, used[q] != 0) << "pool " << q;
+}
+
+// Every cover of `covers` the same as the first, field by field, bit for bit.
+void expect_all_equal(const std::vector<Cover>& covers) {
+  for (std::size_t k = 1; k < covers.size(); ++k) {
+    SCOPED_TRACE(::testing::Message() << "cover " << k);
+    EXPECT_EQ(covers[0].picks, covers[k].picks);
+    EXPECT_EQ(covers[0].curve, covers[k].curve);
+    EXPECT_EQ(covers[0].vertex_patch, covers[k].vertex_patch);
+    EXPECT_EQ(covers[0].covered_area, covers[k].covered_area);
+    EXPECT_EQ(covers[0].used, covers[k].used);
+  }
 }
 
 CoverOptions take_all(int max_patches) {
@@ -424,14 +449,54 @@ TEST(GreedyCover, SameCoverWhateverTheThreadCount) {
       covers.push_back(e);
     }
     SCOPED_TRACE(::testing::Message() << "trial " << trial);
-    for (std::size_t k = 1; k < covers.size(); ++k) {
-      EXPECT_EQ(covers[0].picks, covers[k].picks);
-      EXPECT_EQ(covers[0].curve, covers[k].curve);
-      EXPECT_EQ(covers[0].vertex_patch, covers[k].vertex_patch);
-      EXPECT_EQ(covers[0].covered_area, covers[k].covered_area);
-      EXPECT_EQ(covers[0].used, covers[k].used);
-    }
+    expect_all_equal(covers);
     expect_cover_consistent(pool, area, covers[1], true);
+  }
+}
+
+// Lists longer than a block (kCoverBlock): a part one patch covers, and pools of a few long
+// patches. Their sums are split into blocks, each a task of its own: the same cover at one
+// thread and at two, from greedy_cover and improve_cover, extend_cover and order_cover alike,
+// its covered area summed block by block (expect_cover_consistent). Areas over six orders of
+// magnitude, so that how the terms are grouped shows in the sums' last bits; lists in no
+// order.
+TEST(GreedyCover, LongListsSumInBlocksTheSameAtAnyThreadCount) {
+  std::mt19937 rng(11);
+  std::uniform_real_distribution<double> exponent(-4.0, 2.0);
+  const int V = 8 * static_cast<int>(kCoverBlock) + 1234;
+  VecX area(V);
+  for (int v = 0; v < V; ++v) area(v) = std::pow(10.0, exponent(rng));
+  for (int trial = 0; trial < 6; ++trial) {
+    SCOPED_TRACE(::testing::Message() << "trial " << trial);
+    const int P = trial == 0 ? 1 : 2 + trial;  // trial 0: one patch over nearly all of Φ
+    std::vector<Patch> pool;
+    for (int k = 0; k < P; ++k)
+      pool.push_back(trial == 0 ? make_patch(range_of(7, V - 3)) : random_run(rng, V, V, 2));
+    for (Patch& p : pool) std::shuffle(p.covered_vertices.begin(), p.covered_vertices.end(), rng);
+    CoverOptions o = take_all(P);                  // every entry picked: none to swap in
+    if (trial % 2 == 0 && P > 1) o.max_patches = P - 1;  // one left over to swap in
+    if (trial == 0) {
+      // The data tells the blocks from one sum in the list's order.
+      double plain = 0.0;
+      for (int v : pool[0].covered_vertices) plain += area(v);
+      ASSERT_GT(pool[0].covered_vertices.size(), 8 * kCoverBlock);
+      ASSERT_NE(plain, block_sum(pool[0].covered_vertices, 0.0, area, [](int) { return true; }));
+    }
+    std::vector<Cover> covers;
+    for (const int threads : {1, 2}) {
+      const ThreadLimit limit(threads);
+      Cover c = empty_cover(area);
+      greedy_cover(pool, area, o, &c);
+      expect_cover_consistent(pool, area, c);
+      improve_cover(pool, area, 4, &c);
+      covers.push_back(c);
+      Cover e = empty_cover(area);  // the two calls in one
+      extend_cover(pool, area, o, 4, &e);
+      covers.push_back(e);
+      covers.push_back(order_cover(pool, area, c.picks));
+    }
+    expect_all_equal(covers);
+    expect_cover_consistent(pool, area, covers[0], true);
   }
 }
 
