@@ -882,7 +882,9 @@ DecomposeResult decompose(const SurfaceIndex& index, const DecomposeOptions& o, 
     if (pass == 0 || kept.fraction() > final_cover.fraction()) final_cover = std::move(kept);
     out.times.finish += since(t0);
     if (final_cover.fraction() >= o.coverage_target || !lost || pass + 1 == kFinishPasses) break;
+    const auto t_again = Clock::now();
     Cover again = d.cover_again();
+    out.times.cover += since(t_again);
     const bool unfinished =
         std::any_of(again.picks.begin(), again.picks.end(), [&](int k) { return !d.finished(k); });
     if (unfinished && again.fraction() >= final_cover.fraction() + o.min_round_gain)
