@@ -406,6 +406,9 @@ class Decomposition {
   DecomposeResult& out_;
   const VecX area_;
   Cover cover_;
+  // The greedy cover that grow's last look made of the pool, from cover_, while neither has
+  // changed since: the round's cover starts from its picks.
+  std::optional<Cover> grown_cover_;
   std::unique_ptr<SeedTiler> tiler_;  // Φ's scale and vertex grids, kept over the rounds
   std::optional<std::vector<Seed>> first_seeds_;  // round 0's, until it takes them
 
@@ -454,9 +457,16 @@ bool Decomposition::rounds() {
 
     grow(bars, lines);
 
-    // 4. Cover.
+    // 4. Cover: the greedy picks, as grow's last look at the pool made them where nothing
+    // has changed since (the same picks, made once), then the swaps.
     const auto t0 = Clock::now();
-    extend_cover(pool_, area_, s_.cover, o.max_swaps, &cover_);
+    if (grown_cover_) {
+      cover_ = std::move(*grown_cover_);
+      grown_cover_.reset();
+      improve_cover(pool_, area_, o.max_swaps, &cover_);
+    } else {
+      extend_cover(pool_, area_, s_.cover, o.max_swaps, &cover_);
+    }
     out_.times.cover += since(t0);
     out_.rounds = round + 1;
     say_("round " + std::to_string(round + 1) + ": " + std::to_string(cover_.picks.size()) + " patches cover " +
@@ -752,6 +762,7 @@ void Decomposition::grow(const RoundBars& bars, const std::vector<LineCandidate>
   int grown_this_round = 0;
   std::size_t next = 0;
   double reached = cover_.fraction();  // by the greedy cover of the pool after the last batch
+  grown_cover_.reset();
   while (grown_this_round < o.grow_per_round && next < lines.size()) {
     std::vector<const LineCandidate*> batch;
     while (static_cast<int>(batch.size()) < o.batch && grown_this_round + static_cast<int>(batch.size()) < o.grow_per_round &&
@@ -760,6 +771,7 @@ void Decomposition::grow(const RoundBars& bars, const std::vector<LineCandidate>
       if (!already_claimed(work_, c, claims_)) batch.push_back(&c);
     }
     if (batch.empty()) break;
+    grown_cover_.reset();  // the pool changes
     GrownBatch b = grow_batch(bars, std::move(batch));
     const int alone = take_in(bars, b, grown_this_round);
     say_("round " + std::to_string(bars.round + 1) + ": grown " + std::to_string(grown_this_round) + ", " +
@@ -776,17 +788,18 @@ void Decomposition::grow(const RoundBars& bars, const std::vector<LineCandidate>
       if (b.kept < b.lines.size()) next = static_cast<std::size_t>(b.lines[b.kept] - lines.data());
     }
     // Enough in the pool to reach the target: the rest need not be grown.
-    Cover trial = cover_;
-    greedy_cover(pool_, area_, s_.cover, &trial);
-    if (trial.fraction() >= o.coverage_target) break;
+    grown_cover_ = cover_;
+    greedy_cover(pool_, area_, s_.cover, &*grown_cover_);
+    const double trial = grown_cover_->fraction();
+    if (trial >= o.coverage_target) break;
     // A batch that adds less than min_round_gain to the pool's greedy cover ends the
     // round's growth, as such a round ends the search: the next candidates rank below
     // those that added nothing worth a patch (on Rotor 67's lower face, the third round's
     // first batch added nothing, and its second, grown for nothing, took about a quarter
     // of the round). The round's cover still improves with its swaps (improve_cover).
     // min_round_gain = 0 grows every batch, as before.
-    if (trial.fraction() - reached < o.min_round_gain) break;
-    reached = trial.fraction();
+    if (trial - reached < o.min_round_gain) break;
+    reached = trial;
   }
   out_.times.fit += since(t0) - (out_.times.finish - finish_before);
 }
