@@ -128,20 +128,26 @@ void greedy_on(Crew& crew, const std::vector<Patch>& pool, const VecX& area, con
   }
 }
 
-void order_on(Crew& crew, const std::vector<Patch>& pool, const VecX& area, std::vector<int> picks, Cover* c);
+// Per vertex, how many of `picks` (pool indices) cover it.
+std::vector<int> count_covering(const std::vector<Patch>& pool, const VecX& area, const std::vector<int>& picks) {
+  std::vector<int> count(static_cast<std::size_t>(area.size()), 0);
+  for (int k : picks)
+    for (int v : pool[static_cast<std::size_t>(k)].covered_vertices) ++count[static_cast<std::size_t>(v)];
+  return count;
+}
+
+void order_on(Crew& crew, const std::vector<Patch>& pool, const VecX& area, std::vector<int> picks, Cover* c,
+              std::vector<int> count = {});
 
 // improve_cover's swaps of `picks` (pool indices, the cover's picks), with `crew` for the
-// sums.
-void swap_picks(Crew& crew, const std::vector<Patch>& pool, const VecX& area, int max_swaps, double total_area,
-                std::vector<int>& picks) {
+// sums. Returns count_covering of the picks it leaves.
+std::vector<int> swap_picks(Crew& crew, const std::vector<Patch>& pool, const VecX& area, int max_swaps,
+                            double total_area, std::vector<int>& picks) {
   const std::size_t V = static_cast<std::size_t>(area.size());
-  std::vector<int> count(V, 0);  // picked patches covering each vertex
+  std::vector<int> count = count_covering(pool, area, picks);  // picked patches covering each vertex
   std::vector<int> sole(V, -1);  // where count is 1: the index into `picks` of that patch
   std::vector<char> picked(pool.size(), 0);
-  for (int k : picks) {
-    picked[static_cast<std::size_t>(k)] = 1;
-    for (int v : pool[static_cast<std::size_t>(k)].covered_vertices) ++count[static_cast<std::size_t>(v)];
-  }
+  for (int k : picks) picked[static_cast<std::size_t>(k)] = 1;
   const std::size_t P = picks.size();
   // A swap of pick i (out) for entry j (in) gains the area of j's vertices that no pick
   // covers, or that i alone covers, and loses the area that i alone covers: one pass over j's
@@ -199,14 +205,16 @@ void swap_picks(Crew& crew, const std::vector<Patch>& pool, const VecX& area, in
     picked[static_cast<std::size_t>(best_in)] = 1;
     picks[static_cast<std::size_t>(best_out)] = best_in;
   }
+  return count;
 }
 
 // improve_cover's swaps and rebuild, with `crew` for the sums.
 void improve_on(Crew& crew, const std::vector<Patch>& pool, const VecX& area, int max_swaps, Cover* c) {
   std::vector<int> picks = c->picks;
   // With every entry picked (the pool of a part one patch covers) there is none to swap in.
-  if (picks.size() < pool.size()) swap_picks(crew, pool, area, max_swaps, c->total_area, picks);
-  order_on(crew, pool, area, picks, c);
+  std::vector<int> count;
+  if (picks.size() < pool.size()) count = swap_picks(crew, pool, area, max_swaps, c->total_area, picks);
+  order_on(crew, pool, area, picks, c, std::move(count));
 }
 }  // namespace
 
@@ -309,12 +317,12 @@ std::vector<int> greedy_order(const std::vector<Patch>& pool, const VecX& area, 
   return greedy;
 }
 
-std::vector<int> elimination_order(const std::vector<Patch>& pool, const VecX& area, const std::vector<int>& picks) {
+namespace {
+// elimination_order, with `count` its count_covering of `picks`.
+std::vector<int> eliminate(const std::vector<Patch>& pool, const VecX& area, const std::vector<int>& picks,
+                           std::vector<int> count) {
   const std::size_t P = picks.size();
   std::vector<int> eliminated;
-  std::vector<int> count(static_cast<std::size_t>(area.size()), 0);
-  for (int k : picks)
-    for (int v : pool[static_cast<std::size_t>(k)].covered_vertices) ++count[static_cast<std::size_t>(v)];
   std::vector<char> gone(P, 0), fresh(P);
   std::vector<double> bound(P, 0.0);  // at most the loss
   for (std::size_t step = 0; step < P; ++step) {
@@ -341,11 +349,18 @@ std::vector<int> elimination_order(const std::vector<Patch>& pool, const VecX& a
   std::reverse(eliminated.begin(), eliminated.end());
   return eliminated;
 }
+}  // namespace
+
+std::vector<int> elimination_order(const std::vector<Patch>& pool, const VecX& area, const std::vector<int>& picks) {
+  return eliminate(pool, area, picks, count_covering(pool, area, picks));
+}
 
 namespace {
 // order_cover's cover of `picks`, made in `c` (its storage reused: on a part of 129,000
-// vertices a fresh cover's first touch of its pages cost more than the sums).
-void order_on(Crew& crew, const std::vector<Patch>& pool, const VecX& area, std::vector<int> picks, Cover* c) {
+// vertices a fresh cover's first touch of its pages cost more than the sums); `count` is
+// count_covering of `picks` where the swaps left it, or empty.
+void order_on(Crew& crew, const std::vector<Patch>& pool, const VecX& area, std::vector<int> picks, Cover* c,
+              std::vector<int> count) {
   std::sort(picks.begin(), picks.end());
   // One pick has one order: its cover is made once, its blocks shared out.
   if (picks.size() <= 1) {
@@ -361,7 +376,9 @@ void order_on(Crew& crew, const std::vector<Patch>& pool, const VecX& area, std:
     if (task == 0)
       cover_in_order(pool, area, greedy_order(pool, area, picks), a);
     else
-      cover_in_order(pool, area, elimination_order(pool, area, picks), b);
+      cover_in_order(pool, area,
+                     count.empty() ? elimination_order(pool, area, picks) : eliminate(pool, area, picks, std::move(count)),
+                     b);
   }, 1);
   double sa = 0.0, sb = 0.0;
   for (double x : a.curve) sa += x;
