@@ -762,7 +762,6 @@ void Decomposition::grow(const RoundBars& bars, const std::vector<LineCandidate>
   int grown_this_round = 0;
   std::size_t next = 0;
   double reached = cover_.fraction();  // by the greedy cover of the pool after the last batch
-  grown_cover_.reset();
   while (grown_this_round < o.grow_per_round && next < lines.size()) {
     std::vector<const LineCandidate*> batch;
     while (static_cast<int>(batch.size()) < o.batch && grown_this_round + static_cast<int>(batch.size()) < o.grow_per_round &&

@@ -373,12 +373,12 @@ void order_on(Crew& crew, const std::vector<Patch>& pool, const VecX& area, std:
   Cover& a = *c;
   Cover b;
   crew.parallel_for(0, 2, [&](std::size_t task, std::size_t) {
-    if (task == 0)
+    if (task == 0) {
       cover_in_order(pool, area, greedy_order(pool, area, picks), a);
-    else
-      cover_in_order(pool, area,
-                     count.empty() ? elimination_order(pool, area, picks) : eliminate(pool, area, picks, std::move(count)),
-                     b);
+    } else {
+      if (count.empty()) count = count_covering(pool, area, picks);
+      cover_in_order(pool, area, eliminate(pool, area, picks, std::move(count)), b);
+    }
   }, 1);
   double sa = 0.0, sb = 0.0;
   for (double x : a.curve) sa += x;
