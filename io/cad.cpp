@@ -263,7 +263,7 @@ CadPart CadPart::read(const std::string& path, double probe_seconds) {
   const ChildEnd end = run_in_child([&] {
     const CadPart probe(read_in_process(path));
     const BoundingBox box = probe.bounding_box({});
-    if (box.diagonal() > 0 && std::isfinite(box.diagonal())) probe.tessellate({}, 1e-2 * box.diagonal());
+    if (box.diagonal() > 0 && std::isfinite(box.diagonal())) probe.tessellate({}, 1e-2 * box.diagonal(), {}, false);
   }, probe_seconds);
   if (end == ChildEnd::crashed)
     fail(path, "Open CASCADE crashed reading this file: it is malformed, or holds entities OCCT cannot read");
@@ -313,6 +313,11 @@ BoundingBox CadPart::bounding_box(const std::vector<int>& faces) const {
 
 CadTessellation CadPart::tessellate(const std::vector<int>& faces, double deviation,
                                     const ReadOptions& options) const {
+  return tessellate(faces, deviation, options, true);
+}
+
+CadTessellation CadPart::tessellate(const std::vector<int>& faces, double deviation, const ReadOptions& options,
+                                    bool parallel) const {
   check_faces(faces);
   const std::string& path = impl_->path;
   if (!(deviation > 0) || !std::isfinite(deviation)) fail(path, "the chord deviation must be a positive length");
@@ -328,8 +333,8 @@ CadTessellation CadPart::tessellate(const std::vector<int>& faces, double deviat
   std::vector<double> xyz;
   std::vector<int> triangles;
   // Sewn first, so that faces meeting along an edge share its points.
-  module(path).tessellate(*impl_->shape, path, chosen, std::max(1e-6 * diagonal, 1e-7), deviation, xyz, triangles,
-                          out.deviation);
+  module(path).tessellate(*impl_->shape, path, chosen, std::max(1e-6 * diagonal, 1e-7), deviation, parallel, xyz,
+                          triangles, out.deviation);
   if (triangles.empty()) fail(path, "the chosen faces gave no triangles");
 
   // Points of an edge shared by two faces may differ by rounding: snap each point onto the

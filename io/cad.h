@@ -83,6 +83,9 @@ class CadPart {
   struct Impl;
   explicit CadPart(std::unique_ptr<Impl> impl);
   static std::unique_ptr<Impl> read_in_process(const std::string& path);
+  // tessellate's work; `parallel` false in the trial read's forked child.
+  CadTessellation tessellate(const std::vector<int>& faces, double deviation, const ReadOptions& options,
+                             bool parallel) const;
   std::unique_ptr<Impl> impl_;
 };
 

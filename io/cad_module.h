@@ -17,7 +17,7 @@
 
 namespace flank::io::cad_module {
 
-constexpr int kVersion = 1;
+constexpr int kVersion = 2;
 
 // Whether a CAD file's lower-case extension (io::lower_extension) is STEP's; IGES's otherwise.
 inline bool step_extension(const std::string& ext) { return ext == ".step" || ext == ".stp"; }
@@ -33,9 +33,11 @@ struct Api {
   std::shared_ptr<const Shape> (*read)(const std::string& path, bool step, std::vector<CadFace>& faces,
                                        std::vector<std::string>& names) = nullptr;
   // Faces `faces` (1-based, sorted, distinct) sewn within `sew` and tessellated within
-  // `deviation` mm: points (xyz), triangles and the largest chord deviation measured.
+  // `deviation` mm: points (xyz), triangles and the largest chord deviation measured. With
+  // `parallel`, faces are meshed on oneTBB's threads (never in a forked child: oneTBB's
+  // threads do not survive a fork); the mesh is the same either way.
   void (*tessellate)(const Shape& shape, const std::string& path, const std::vector<int>& faces, double sew,
-                     double deviation, std::vector<double>& xyz, std::vector<int>& triangles,
+                     double deviation, bool parallel, std::vector<double>& xyz, std::vector<int>& triangles,
                      double& measured) = nullptr;
   Vec3 (*face_point)(const Shape& shape, const std::string& path, int index, double u, double v) = nullptr;
   double (*distance)(const Shape& shape, const std::string& path, const Vec3& p) = nullptr;

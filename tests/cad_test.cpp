@@ -9,6 +9,7 @@
 #include <filesystem>
 #include <fstream>
 #include <limits>
+#include <map>
 #include <nlohmann/json.hpp>
 #include <optional>
 #include <sstream>
@@ -406,6 +407,45 @@ TEST_F(CadIo, TessellationIsSewnAndWithinItsDeviation) {
   EXPECT_EQ(one.faces, 1);
   EXPECT_GT(one.mesh.mesh.V.col(2).minCoeff(), 20.0 - 1e-9);
   EXPECT_THROW(part.tessellate({3}, 0.01), io::Error);
+}
+
+// A face is meshed in pieces, on as many threads as the command has: the mesh is the same on
+// one thread and two, and its pieces are sewn (no crack: every open edge is on the face's own
+// border, the quarter cylinder's two straight sides and two arcs).
+TEST_F(CadIo, FaceMeshedInPiecesIsOneMeshWhateverTheThreadCount) {
+  const report::FittedSurface f = report::fit_exact_grid("cylinder", cylinder_grid(20, 6), 20, 6, 1e-7);
+  io::write_surfaces(dir_ / "one.step", {{"P0", f.surface}});
+  const io::CadPart part = io::CadPart::read((dir_ / "one.step").string());
+  ASSERT_EQ(part.faces().size(), 1u);
+  std::vector<io::CadTessellation> t;
+  for (const int threads : {1, 2}) {
+    ThreadLimit limit(threads);
+    t.push_back(part.tessellate({}, 2e-4));
+  }
+  const Mesh& m = t[0].mesh.mesh;
+  EXPECT_GT(m.face_count(), 1000);
+  EXPECT_EQ(m.V, t[1].mesh.mesh.V);
+  EXPECT_EQ(m.F, t[1].mesh.mesh.F);
+  EXPECT_EQ(t[0].deviation, t[1].deviation);
+  EXPECT_EQ(t[0].mesh.report.components, 1);
+  EXPECT_EQ(t[0].mesh.report.non_manifold_edges, 0);
+  std::map<std::pair<int, int>, int> uses;
+  for (int k = 0; k < m.face_count(); ++k)
+    for (int c = 0; c < 3; ++c) {
+      const int a = m.F(k, c), b = m.F(k, (c + 1) % 3);
+      ++uses[{std::min(a, b), std::max(a, b)}];
+    }
+  const auto on_border = [&](int v) {
+    const double x = m.V(v, 0), y = m.V(v, 1), z = m.V(v, 2);
+    return std::abs(z) < 1e-6 || std::abs(z - 20.0) < 1e-6 || std::abs(x) < 1e-6 || std::abs(y) < 1e-6;
+  };
+  int open = 0;
+  for (const auto& [edge, count] : uses) {
+    if (count != 1) continue;
+    ++open;
+    EXPECT_TRUE(on_border(edge.first) && on_border(edge.second)) << m.V.row(edge.first) << " " << m.V.row(edge.second);
+  }
+  EXPECT_EQ(open, t[0].mesh.report.boundary_edges);
 }
 
 TEST_F(CadIo, BadFilesAreRefusedInOneLine) {

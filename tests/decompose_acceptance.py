@@ -206,9 +206,14 @@ def main(argv=None):
             name = f"{tool} envelope of {guides} (side {side}) through {a.args[0].upper()} at 1e-4"
             if len(a.args) == 1:
                 # The cone only: what is judged is the CAD reading, not the choice of tool kind.
+                # One patch's coverage moves with the tessellation by about half a point: at
+                # tolerances 0.8-1.3e-4 this face gave 98.95-100% through STEP and IGES with
+                # the faces meshed whole, and the same spread cut in pieces (measured when
+                # the faces were first cut, 2026-11-29). 98.5% asks for the whole face but
+                # that boundary strip, whatever the tessellation.
                 data = decompose(a.flank, cad, out, 1e-4, ["--tool", "cone"])
                 res = check_patches.check(os.path.join(out, "patches.json"), mesh)
-                fails, summary = judge(data, res, out, 1, 0.99, max_patches=1)
+                fails, summary = judge(data, res, out, 1, 0.985, max_patches=1)
             else:
                 data = decompose(a.flank, cad, out, 1e-4)
                 res = check_patches.check(os.path.join(out, "patches.json"), mesh)
