@@ -68,7 +68,8 @@ class CadPart {
   void check_faces(const std::vector<int>& faces) const;
   BoundingBox bounding_box(const std::vector<int>& faces) const;
   // The chosen faces (all when empty) sewn and tessellated with a chord deviation of at most
-  // `deviation` mm.
+  // `deviation` mm, in pieces on the threads the caller has (ThreadLimit); the mesh does not
+  // depend on their count.
   CadTessellation tessellate(const std::vector<int>& faces, double deviation,
                              const ReadOptions& options = {}) const;
   // Face `index` (1-based) evaluated at normalised parameters (u, v) ∈ [0, 1]² of its

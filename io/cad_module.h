@@ -32,10 +32,11 @@ struct Api {
   // of at most kMaxCadFileBytes): its shape; its faces and their names filled in.
   std::shared_ptr<const Shape> (*read)(const std::string& path, bool step, std::vector<CadFace>& faces,
                                        std::vector<std::string>& names) = nullptr;
-  // Faces `faces` (1-based, sorted, distinct) sewn within `sew` and tessellated within
-  // `deviation` mm: points (xyz), triangles and the largest chord deviation measured. With
-  // `parallel`, faces are meshed on oneTBB's threads (never in a forked child: oneTBB's
-  // threads do not survive a fork); the mesh is the same either way.
+  // Faces `faces` (1-based, sorted, distinct), each cut into its share by area of some 8
+  // pieces, sewn within `sew` and tessellated within `deviation` mm: points (xyz), triangles
+  // and the largest chord deviation measured. With `parallel`, the pieces are meshed on
+  // oneTBB's threads (never in a forked child: oneTBB's threads do not survive a fork); the
+  // mesh is the same either way.
   void (*tessellate)(const Shape& shape, const std::string& path, const std::vector<int>& faces, double sew,
                      double deviation, bool parallel, std::vector<double>& xyz, std::vector<int>& triangles,
                      double& measured) = nullptr;

@@ -52,10 +52,9 @@ void clear_cover(const VecX& area, Cover& c, Crew* crew = nullptr) {
     c.total_area = area.sum();
     return;
   }
-  c.vertex_patch.resize(n);
   crew->parallel_for(0, 2, [&](std::size_t task, std::size_t) {
     if (task == 0)
-      std::fill(c.vertex_patch.begin(), c.vertex_patch.end(), -1);
+      c.vertex_patch.assign(n, -1);
     else
       c.total_area = area.sum();
   }, 1);
