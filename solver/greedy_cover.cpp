@@ -13,11 +13,10 @@ namespace flank {
 // each entry's sum is computed on its own, in parallel, into per-entry storage, and the choice
 // is made after, serially, in the order and with the tie rules the serial loops had: the
 // result is the same bit for bit whatever the thread count. An entry sums a patch's covered
-// vertices, a few thousand: a few microseconds, hence small grains. A long list is summed in
-// blocks (kCoverBlock), each a task of its own.
+// vertices, a few thousand: a few microseconds, so each is a task of its own, and the longest
+// are taken first (longest_first). A long list is summed in blocks (kCoverBlock), each a task
+// of its own.
 namespace {
-constexpr std::size_t kGrain = 2;
-
 // The blocks of a list of n vertices: at least one.
 std::size_t blocks_of(std::size_t n) { return std::max<std::size_t>(1, (n + kCoverBlock - 1) / kCoverBlock); }
 
@@ -25,6 +24,18 @@ std::size_t blocks_of(std::size_t n) { return std::max<std::size_t>(1, (n + kCov
 std::span<const int> block(const std::vector<int>& list, std::size_t b) {
   const std::size_t first = b * kCoverBlock;
   return std::span<const int>(list).subspan(first, std::min(kCoverBlock, list.size() - first));
+}
+
+// The tasks 0 .. n − 1 in the order their threads should take them: the longest (by
+// `length`) first, ties in task order. A pool's lists run from a few vertices to a third of
+// Φ; taken longest first, one at a time, the threads finish together (in the pool's order, a
+// long list taken last kept one thread summing alone while the other waited).
+template <class Length>
+std::vector<std::size_t> longest_first(std::size_t n, Length&& length) {
+  std::vector<std::size_t> order(n);
+  std::iota(order.begin(), order.end(), std::size_t{0});
+  std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return length(a) > length(b); });
+  return order;
 }
 
 // Σ area(v) over v in `vertices` where keep(v), in the list's order.
@@ -92,11 +103,15 @@ void greedy_on(Crew& crew, const std::vector<Patch>& pool, const VecX& area, con
   // on one thread while the others waited: on HECC a's first cover, 43 µs of greedy's 240 at
   // one thread, and of its 137 at two.)
   std::vector<double> part(first.back(), 0.0), lead(pool.size(), 0.0);
+  const std::vector<std::size_t> longest = longest_first(first.back(), [&](std::size_t t) {
+    return block(pool[entry[t]].covered_vertices, t - first[entry[t]]).size();
+  });
   for (int picked = 0; o.max_picks <= 0 || picked < o.max_picks; ++picked) {
     const int id = static_cast<int>(c->picks.size());
     if (full(*c, o)) break;
     crew.parallel_for(0, first.back(), [&](std::size_t b, std::size_t e) {
-      for (std::size_t t = b; t < e; ++t) {
+      for (std::size_t r = b; r < e; ++r) {
+        const std::size_t t = longest[r];
         const std::size_t k = entry[t];
         if (c->used[k]) continue;
         double gain = 0.0, sum = c->covered_area;
@@ -105,7 +120,7 @@ void greedy_on(Crew& crew, const std::vector<Patch>& pool, const VecX& area, con
         part[t] = gain;
         if (t == first[k]) lead[k] = sum;
       }
-    }, kGrain);
+    }, 1);
     int pick = -1;
     double best_gain = 0.0;
     for (std::size_t k = 0; k < pool.size(); ++k) {
@@ -156,35 +171,41 @@ void order_on(Crew& crew, const std::vector<Patch>& pool, const VecX& area, std:
 std::vector<int> swap_picks(Crew& crew, const std::vector<Patch>& pool, const VecX& area, int max_swaps,
                             double total_area, std::vector<int>& picks) {
   const std::size_t V = static_cast<std::size_t>(area.size());
-  std::vector<int> count = count_covering(pool, area, picks);  // picked patches covering each vertex
-  std::vector<int> sole(V, -1);  // where count is 1: the index into `picks` of that patch
-  std::vector<char> picked(pool.size(), 0);
-  for (int k : picks) picked[static_cast<std::size_t>(k)] = 1;
   const std::size_t P = picks.size();
+  // Per vertex, how many picks cover it and the sum of their slots (indices into `picks`):
+  // where one pick covers a vertex, the sum is that pick's slot. A swap keeps the slot of the
+  // pick it takes out for the one it puts in, so both move only on the two patches' vertices.
+  std::vector<int> count(V, 0), slots(V, 0);
+  const auto add = [&](std::size_t k, int by, int slot) {  // entry k's vertices, `by` times at `slot`
+    for (int v : pool[k].covered_vertices)
+      count[static_cast<std::size_t>(v)] += by, slots[static_cast<std::size_t>(v)] += by * slot;
+  };
+  for (std::size_t i = 0; i < P; ++i) add(static_cast<std::size_t>(picks[i]), 1, static_cast<int>(i));
+  std::vector<int> slot_of(pool.size(), -1);  // per pool entry: its slot, or −1 if not picked
+  for (std::size_t i = 0; i < P; ++i) slot_of[static_cast<std::size_t>(picks[i])] = static_cast<int>(i);
   // A swap of pick i (out) for entry j (in) gains the area of j's vertices that no pick
   // covers, or that i alone covers, and loses the area that i alone covers: one pass over j's
   // vertices gives its gain for every i at once (what no pick covers adds to each i's sum,
   // what pick i alone covers to i's), where taking each i out on its own would pass over
   // every entry once per pick. Each sum gets the same terms in the same order (the order of
   // j's vertices) as summing j's gain with i taken out: the same values, bit for bit. A
-  // patch lists each covered vertex once (evaluate_patch).
+  // patch lists each covered vertex once (evaluate_patch). One pass over the pool sums both:
+  // a pick's entry its loss, any other entry its gains (one fork per swap, not two).
+  const std::vector<std::size_t> longest =
+      longest_first(pool.size(), [&](std::size_t j) { return pool[j].covered_vertices.size(); });
   std::vector<double> loss(P), gain(pool.size() * P);  // gain: row j, column i
   for (int swap = 0; swap < max_swaps; ++swap) {
     const double least = 1e-9 * total_area;  // a swap must gain more than rounding
-    // Per pick, what it alone covers: its loss, and those vertices marked as its own (a
-    // vertex covered once is one pick's only: no two tasks write it).
-    crew.parallel_for(0, P, [&](std::size_t b, std::size_t e) {
-      for (std::size_t i = b; i < e; ++i) {
-        double sum = 0.0;
-        for (int v : pool[static_cast<std::size_t>(picks[i])].covered_vertices)
-          if (count[static_cast<std::size_t>(v)] == 1)
-            sole[static_cast<std::size_t>(v)] = static_cast<int>(i), sum += area(v);
-        loss[i] = sum;
-      }
-    }, 1);
     crew.parallel_for(0, pool.size(), [&](std::size_t b, std::size_t e) {
-      for (std::size_t j = b; j < e; ++j) {
-        if (picked[j]) continue;
+      for (std::size_t r = b; r < e; ++r) {
+        const std::size_t j = longest[r];
+        if (slot_of[j] >= 0) {
+          double sum = 0.0;
+          for (int v : pool[j].covered_vertices)
+            if (count[static_cast<std::size_t>(v)] == 1) sum += area(v);
+          loss[static_cast<std::size_t>(slot_of[j])] = sum;
+          continue;
+        }
         double* sum = &gain[j * P];
         std::fill(sum, sum + P, 0.0);
         for (int v : pool[j].covered_vertices) {
@@ -193,10 +214,10 @@ std::vector<int> swap_picks(Crew& crew, const std::vector<Patch>& pool, const Ve
           if (n == 0)
             for (std::size_t i = 0; i < P; ++i) sum[i] += a;
           else if (n == 1)
-            sum[sole[static_cast<std::size_t>(v)]] += a;
+            sum[slots[static_cast<std::size_t>(v)]] += a;
         }
       }
-    }, kGrain);
+    }, 1);
     // Per pick taken out, the first entry at the largest gain over `least`; then the first
     // pick at the largest.
     double best_delta = least;
@@ -206,15 +227,16 @@ std::vector<int> swap_picks(Crew& crew, const std::vector<Patch>& pool, const Ve
       int in = -1;
       for (std::size_t j = 0; j < pool.size(); ++j) {
         const double d = gain[j * P + i] - loss[i];
-        if (!picked[j] && d > delta) delta = d, in = static_cast<int>(j);
+        if (slot_of[j] < 0 && d > delta) delta = d, in = static_cast<int>(j);
       }
       if (in >= 0 && delta > best_delta) best_delta = delta, best_out = static_cast<int>(i), best_in = in;
     }
     if (best_out < 0) break;
-    for (int v : pool[static_cast<std::size_t>(picks[best_out])].covered_vertices) --count[static_cast<std::size_t>(v)];
-    for (int v : pool[static_cast<std::size_t>(best_in)].covered_vertices) ++count[static_cast<std::size_t>(v)];
-    picked[static_cast<std::size_t>(picks[best_out])] = 0;
-    picked[static_cast<std::size_t>(best_in)] = 1;
+    const auto out = static_cast<std::size_t>(picks[static_cast<std::size_t>(best_out)]);
+    add(out, -1, best_out);
+    add(static_cast<std::size_t>(best_in), 1, best_out);
+    slot_of[out] = -1;
+    slot_of[static_cast<std::size_t>(best_in)] = best_out;
     picks[static_cast<std::size_t>(best_out)] = best_in;
   }
   return count;
