@@ -49,32 +49,30 @@ double area_where(const std::vector<int>& vertices, const VecX& area, Keep&& kee
 }  // namespace
 
 namespace {
-// Makes `c` the empty cover of Φ, keeping its storage. With `crew`, Φ's owners are cleared
-// beside its area's sum (Eigen's, the same bits on any thread): on the 1M cone they are 2 MB
-// written and 4 MB read, a one-pick cover's only serial work.
-void clear_cover(const VecX& area, Cover& c, Crew* crew = nullptr) {
+// Makes `c` the empty cover of Φ, whose vertex areas `area` sum to `total`, keeping its
+// storage. The sum (area.sum(); 4 MB read on the 1M cone) is the caller's: Φ does not change.
+// With `crew`, Φ's owners, where `c` holds them already, are cleared in two halves (2 MB).
+void clear_cover(const VecX& area, double total, Cover& c, Crew* crew = nullptr) {
   const auto n = static_cast<std::size_t>(area.size());
   c.used.clear();
   c.picks.clear();
   c.curve.clear();
   c.covered_area = 0.0;
-  if (!crew) {
+  c.total_area = total;
+  if (!crew || c.vertex_patch.size() != n) {
     c.vertex_patch.assign(n, -1);
-    c.total_area = area.sum();
     return;
   }
-  crew->parallel_for(0, 2, [&](std::size_t task, std::size_t) {
-    if (task == 0)
-      c.vertex_patch.assign(n, -1);
-    else
-      c.total_area = area.sum();
+  crew->parallel_for(0, 2, [&](std::size_t half, std::size_t) {
+    std::fill(c.vertex_patch.begin() + static_cast<std::ptrdiff_t>(half * n / 2),
+              c.vertex_patch.begin() + static_cast<std::ptrdiff_t>((half + 1) * n / 2), -1);
   }, 1);
 }
 }  // namespace
 
 Cover empty_cover(const VecX& area) {
   Cover c;
-  clear_cover(area, c);
+  clear_cover(area, area.sum(), c);
   return c;
 }
 
@@ -163,8 +161,8 @@ std::vector<int> count_covering(const std::vector<Patch>& pool, const VecX& area
   return count;
 }
 
-void order_on(Crew& crew, const std::vector<Patch>& pool, const VecX& area, std::vector<int> picks, Cover* c,
-              std::vector<int> count = {});
+void order_on(Crew& crew, const std::vector<Patch>& pool, const VecX& area, double total, std::vector<int> picks,
+              Cover* c, std::vector<int> count = {});
 
 // improve_cover's swaps of `picks` (pool indices, the cover's picks), with `crew` for the
 // sums. Returns count_covering of the picks it leaves.
@@ -248,7 +246,7 @@ void improve_on(Crew& crew, const std::vector<Patch>& pool, const VecX& area, in
   // With every entry picked (the pool of a part one patch covers) there is none to swap in.
   std::vector<int> count;
   if (picks.size() < pool.size()) count = swap_picks(crew, pool, area, max_swaps, c->total_area, picks);
-  order_on(crew, pool, area, picks, c, std::move(count));
+  order_on(crew, pool, area, c->total_area, picks, c, std::move(count));
 }
 }  // namespace
 
@@ -273,11 +271,11 @@ void extend_cover(const std::vector<Patch>& pool, const VecX& area, const CoverO
 
 namespace {
 // The cover of `order` (pool indices) taken in that order, made in `c` (whatever it held: its
-// storage is reused); with `crew`, each pick's blocks (kCoverBlock) are marked and summed in
-// parallel.
-void cover_in_order(const std::vector<Patch>& pool, const VecX& area, const std::vector<int>& order, Cover& c,
-                    Crew* crew = nullptr) {
-  clear_cover(area, c, crew);
+// storage is reused); `total` is area.sum(). With `crew`, each pick's blocks (kCoverBlock) are
+// marked and summed in parallel.
+void cover_in_order(const std::vector<Patch>& pool, const VecX& area, double total, const std::vector<int>& order,
+                    Cover& c, Crew* crew = nullptr) {
+  clear_cover(area, total, c, crew);
   c.used.assign(pool.size(), 0);
   std::vector<double> part;
   for (int k : order) {
@@ -392,13 +390,20 @@ std::vector<int> elimination_order(const std::vector<Patch>& pool, const VecX& a
 namespace {
 // order_cover's cover of `picks`, made in `c` (its storage reused: on a part of 129,000
 // vertices a fresh cover's first touch of its pages cost more than the sums); `count` is
-// count_covering of `picks` where the swaps left it, or empty.
-void order_on(Crew& crew, const std::vector<Patch>& pool, const VecX& area, std::vector<int> picks, Cover* c,
-              std::vector<int> count) {
+// count_covering of `picks` where the swaps left it, or empty; `total` is area.sum().
+void order_on(Crew& crew, const std::vector<Patch>& pool, const VecX& area, double total, std::vector<int> picks,
+              Cover* c, std::vector<int> count) {
   std::sort(picks.begin(), picks.end());
-  // One pick has one order: its cover is made once, its blocks shared out.
+  // One pick has one order. A cover of that pick alone is that order's cover already: greedy
+  // and cover_in_order mark its vertices and sum its blocks the same way, from the same empty
+  // cover (on the 1M cone, a third of the cover stage was this cover made again).
+  if (picks.size() == 1 && c->picks == picks) {
+    c->used.resize(pool.size(), 0);
+    return;
+  }
+  // Otherwise its cover is made once, its blocks shared out.
   if (picks.size() <= 1) {
-    cover_in_order(pool, area, picks, *c, &crew);
+    cover_in_order(pool, area, total, picks, *c, &crew);
     return;
   }
   // The two orders and their covers are independent: one task each. (Their steps, a few
@@ -408,10 +413,10 @@ void order_on(Crew& crew, const std::vector<Patch>& pool, const VecX& area, std:
   Cover b;
   crew.parallel_for(0, 2, [&](std::size_t task, std::size_t) {
     if (task == 0) {
-      cover_in_order(pool, area, greedy_order(pool, area, picks), a);
+      cover_in_order(pool, area, total, greedy_order(pool, area, picks), a);
     } else {
       if (count.empty()) count = count_covering(pool, area, picks);
-      cover_in_order(pool, area, eliminate(pool, area, picks, std::move(count)), b);
+      cover_in_order(pool, area, total, eliminate(pool, area, picks, std::move(count)), b);
     }
   }, 1);
   double sa = 0.0, sb = 0.0;
@@ -423,7 +428,8 @@ void order_on(Crew& crew, const std::vector<Patch>& pool, const VecX& area, std:
 
 Cover order_cover(const std::vector<Patch>& pool, const VecX& area, std::vector<int> picks) {
   Cover out;
-  with_crew([&](Crew& crew) { order_on(crew, pool, area, std::move(picks), &out); });
+  const double total = area.sum();
+  with_crew([&](Crew& crew) { order_on(crew, pool, area, total, std::move(picks), &out); });
   return out;
 }
 
