@@ -12,6 +12,8 @@
 // a finer mesh. Names:
 //   Ladder/<stage>/<part>/tri_k:<thousands of triangles>/threads:<1|2>
 // Stages:
+//   read       the rung's file read and repaired (io::read_mesh): a face's own STL, a PLY of
+//              the others' meshes, as the command stage reads them.
 //   index      search tree (oriented boxes, kernels/obb_tree.h) and adjacency build.
 //   query      raw cold closest points (batch, no hints) at the sample points of the scoring
 //              lines: the limit the other stages are measured against.
@@ -422,6 +424,18 @@ std::filesystem::path command_input(const Rung& r) {
   return path;
 }
 
+void bench_read(benchmark::State& state, Rung r, int threads) {
+  const std::filesystem::path input = command_input(r);
+  const ThreadLimit limit(threads);
+  int triangles = 0;
+  for (auto _ : state) {
+    const io::LoadedMesh m = io::read_mesh(input.string());
+    triangles = m.mesh.face_count();
+    benchmark::DoNotOptimize(&m);
+  }
+  state.counters["triangles"] = static_cast<double>(triangles);
+}
+
 constexpr const char* kGnuTime = "/usr/bin/time";
 
 void bench_command(benchmark::State& state, Rung r, int threads) {
@@ -520,7 +534,8 @@ void register_ladder_benchmarks() {
   }
   using Fn = void (*)(benchmark::State&, Rung, int);
   const std::pair<const char*, Fn> stages[] = {
-      {"index", bench_index},          {"query", bench_query},     {"query_warm", bench_query_warm},
+      {"read", bench_read},            {"index", bench_index},     {"query", bench_query},
+      {"query_warm", bench_query_warm},
       {"query_embree", bench_query_embree}, {"scoring", bench_scoring}, {"fit", bench_fit},
       {"decompose", bench_decompose}, {"command", bench_command}};
   // The whole command up to 64k triangles: the faces as read (24k-38k, what users run) and the

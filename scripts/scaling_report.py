@@ -45,7 +45,7 @@ STANDARD_KEYS = {
     "iterations", "real_time", "cpu_time", "time_unit", "label", "error_occurred",
     "error_message", "skipped", "skip_message",
 }
-STAGES = ["index", "query", "scoring", "fit", "decompose", "command"]
+STAGES = ["read", "index", "query", "scoring", "fit", "decompose", "command"]
 # Decompose sub-stages: (counter, label); their values are seconds per stage.
 SUB_STAGES = [
     ("seeds_s", "decompose: seeds"),
