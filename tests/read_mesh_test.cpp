@@ -17,8 +17,10 @@
 #include <random>
 #include <sstream>
 #include <string>
+#include <tuple>
 #include <vector>
 
+#include "kernels/parallel.h"
 #include "tests/test_files.h"
 
 namespace flank::io {
@@ -284,6 +286,65 @@ TEST_F(ReadMesh, OrientationIsMadeConsistent) {
   const LoadedMesh majority = read_mesh(write("grid_majority.obj", grid_obj(8, 2)));
   EXPECT_EQ(majority.report.flipped_faces, 32);
   EXPECT_DOUBLE_EQ(max_normal_z(majority.mesh), -1.0);
+}
+
+// An n × n grid of unit squares (z = 0, normals +z) as a shuffled triangle soup with every
+// defect the repair mends: each corner its own vertex (some at −0), every 50th triangle twice
+// (its copy starting at another corner), 100 triangles on a repeated vertex, and the last
+// quarter of the columns reversed. Large enough that each of the repair's sorts runs in
+// pieces on two threads: the mesh and its report are the same at one thread and at two, and
+// the report counts what the soup holds.
+TEST_F(ReadMesh, RepairIsTheSameWhateverTheThreadCount) {
+  constexpr int n = 200, flip_from = 150, copies = 2 * n * n / 50, repeated = 100;
+  const auto id = [](int i, int j) { return j * (n + 1) + i; };
+  std::vector<std::array<int, 3>> soup;
+  for (int j = 0; j < n; ++j)
+    for (int i = 0; i < n; ++i) {
+      const int a = id(i, j), b = id(i + 1, j), c = id(i + 1, j + 1), d = id(i, j + 1);
+      if (i >= flip_from)
+        soup.insert(soup.end(), {{a, c, b}, {a, d, c}});
+      else
+        soup.insert(soup.end(), {{a, b, c}, {a, c, d}});
+    }
+  for (int k = 0; k < copies; ++k) {
+    const std::array<int, 3> t = soup[static_cast<std::size_t>(50 * k)];
+    soup.push_back({t[1], t[2], t[0]});
+  }
+  for (int k = 0; k < repeated; ++k) soup.push_back({id(k, 0), id(k, 0), id(k, 1)});
+  std::mt19937 rng(3);
+  std::shuffle(soup.begin(), soup.end(), rng);
+  std::vector<double> xyz;
+  std::vector<int> triangles;
+  for (const auto& t : soup)
+    for (const int v : t) {
+      triangles.push_back(static_cast<int>(xyz.size() / 3));
+      xyz.insert(xyz.end(), {static_cast<double>(v % (n + 1)), static_cast<double>(v / (n + 1)),
+                             triangles.size() % 2 ? -0.0 : 0.0});
+    }
+  std::vector<LoadedMesh> read;
+  for (const int threads : {1, 2}) {
+    const ThreadLimit limit(threads);
+    read.push_back(repair_triangles("soup", xyz, triangles, "soup", {}));
+  }
+  const MeshReport& r = read[0].report;
+  EXPECT_EQ(r.input_faces, 2 * n * n + copies + repeated);
+  EXPECT_EQ(r.welded_vertices, 3 * r.input_faces - (n + 1) * (n + 1));
+  EXPECT_EQ(r.degenerate_faces, repeated);
+  EXPECT_EQ(r.duplicate_faces, copies);
+  EXPECT_EQ(r.unused_vertices, 0);
+  EXPECT_EQ(r.flipped_faces, 2 * n * (n - flip_from));
+  EXPECT_EQ(r.components, 1);
+  EXPECT_EQ(r.boundary_edges, 4 * n);
+  EXPECT_EQ(r.non_manifold_edges, 0);
+  EXPECT_TRUE(r.orientable);
+  EXPECT_DOUBLE_EQ(min_normal_z(read[0].mesh), 1.0);
+  const MeshReport& r2 = read[1].report;
+  EXPECT_EQ(std::tie(r.input_vertices, r.welded_vertices, r.degenerate_faces, r.duplicate_faces, r.flipped_faces,
+                     r.components, r.boundary_edges),
+            std::tie(r2.input_vertices, r2.welded_vertices, r2.degenerate_faces, r2.duplicate_faces,
+                     r2.flipped_faces, r2.components, r2.boundary_edges));
+  EXPECT_EQ(read[0].mesh.V, read[1].mesh.V);
+  EXPECT_EQ(read[0].mesh.F, read[1].mesh.F);
 }
 
 TEST_F(ReadMesh, FlipReversesEverythingAfterRepair) {
