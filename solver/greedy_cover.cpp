@@ -34,7 +34,8 @@ template <class Length>
 std::vector<std::size_t> longest_first(std::size_t n, Length&& length) {
   std::vector<std::size_t> order(n);
   std::iota(order.begin(), order.end(), std::size_t{0});
-  std::stable_sort(order.begin(), order.end(), [&](std::size_t a, std::size_t b) { return length(a) > length(b); });
+  std::stable_sort(order.begin(), order.end(),
+                   [&](std::size_t a, std::size_t b) { return length(a) > length(b); });
   return order;
 }
 
@@ -173,6 +174,7 @@ std::vector<int> swap_picks(Crew& crew, const std::vector<Patch>& pool, const Ve
   // Per vertex, how many picks cover it and the sum of their slots (indices into `picks`):
   // where one pick covers a vertex, the sum is that pick's slot. A swap keeps the slot of the
   // pick it takes out for the one it puts in, so both move only on the two patches' vertices.
+  // (A sum is at most P² / 2: an int holds it for any cover the command line allows.)
   std::vector<int> count(V, 0), slots(V, 0);
   const auto add = [&](std::size_t k, int by, int slot) {  // entry k's vertices, `by` times at `slot`
     for (int v : pool[k].covered_vertices)
@@ -396,7 +398,7 @@ void order_on(Crew& crew, const std::vector<Patch>& pool, const VecX& area, doub
   std::sort(picks.begin(), picks.end());
   // One pick has one order. A cover of that pick alone is that order's cover already: greedy
   // and cover_in_order mark its vertices and sum its blocks the same way, from the same empty
-  // cover (on the 1M cone, a third of the cover stage was this cover made again).
+  // cover (on the 1M cone, some 40% of the cover stage was this cover made again).
   if (picks.size() == 1 && c->picks == picks) {
     c->used.resize(pool.size(), 0);
     return;
