@@ -180,9 +180,12 @@ std::vector<int> swap_picks(Crew& crew, const std::vector<Patch>& pool, const Ve
     for (int v : pool[k].covered_vertices)
       count[static_cast<std::size_t>(v)] += by, slots[static_cast<std::size_t>(v)] += by * slot;
   };
-  for (std::size_t i = 0; i < P; ++i) add(static_cast<std::size_t>(picks[i]), 1, static_cast<int>(i));
   std::vector<int> slot_of(pool.size(), -1);  // per pool entry: its slot, or −1 if not picked
-  for (std::size_t i = 0; i < P; ++i) slot_of[static_cast<std::size_t>(picks[i])] = static_cast<int>(i);
+  for (std::size_t i = 0; i < P; ++i) {
+    const auto k = static_cast<std::size_t>(picks[i]);
+    add(k, 1, static_cast<int>(i));
+    slot_of[k] = static_cast<int>(i);
+  }
   // A swap of pick i (out) for entry j (in) gains the area of j's vertices that no pick
   // covers, or that i alone covers, and loses the area that i alone covers: one pass over j's
   // vertices gives its gain for every i at once (what no pick covers adds to each i's sum,
