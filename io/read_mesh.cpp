@@ -8,6 +8,8 @@
 
 #include <algorithm>
 #include <array>
+#include <atomic>
+#include <bit>
 #include <charconv>
 #include <cmath>
 #include <cstdint>
@@ -15,6 +17,8 @@
 #include <filesystem>
 #include <limits>
 #include <numeric>
+#include <optional>
+#include <span>
 #include <string_view>
 #include <utility>
 #include <vector>
@@ -158,6 +162,18 @@ struct RawMesh {
   std::vector<int> triangles;
 };
 
+// The reader's loops run in pieces of about kPiece items (at most 64 pieces), side by side on
+// the command's threads; what a piece sums is combined in piece order, so results are the same
+// whatever the thread count.
+constexpr std::size_t kPiece = 16384;
+std::size_t piece_count(std::size_t n) { return std::clamp<std::size_t>(n / kPiece, 1, 64); }
+
+// Calls body(piece, begin, end) on each of `pieces` equal pieces of [0, n).
+template <class Body>
+void for_each_piece(std::size_t n, std::size_t pieces, const Body& body) {
+  parallel_invoke_each(pieces, [&](std::size_t c) { body(c, n * c / pieces, n * (c + 1) / pieces); });
+}
+
 // Finite and in range, or a one-line error naming the point: where(), called only then (every
 // point read is checked; its name built each time was some 5% of a binary PLY's read).
 template <class Where>
@@ -259,19 +275,29 @@ RawMesh parse_stl_binary(const std::string& path, std::string_view data) {
                    " triangles but the file holds " + std::to_string(holds) + " (" +
                    std::to_string(data.size()) + " bytes)");
   check_triangle_count(path, expected, true);
+  // Records of a fixed size: read side by side; where any point fails its check, the records
+  // are checked again in order, so that the message names the first.
   RawMesh raw;
-  raw.xyz.reserve(9 * expected);
-  raw.triangles.reserve(3 * expected);
-  for (std::uint64_t t = 0; t < expected; ++t) {
-    const unsigned char* record = bytes + 84 + 50 * t + 12;  // skip the stored normal
-    for (int corner = 0; corner < 3; ++corner) {
-      double p[3];
-      for (int k = 0; k < 3; ++k) p[k] = load_f32(record + 12 * corner + 4 * k);
-      check_coordinates(path, p, [&] { return "triangle " + std::to_string(t + 1); });
-      raw.triangles.push_back(static_cast<int>(raw.xyz.size() / 3));
-      raw.xyz.insert(raw.xyz.end(), p, p + 3);
+  raw.xyz.resize(9 * expected);
+  raw.triangles.resize(3 * expected);
+  std::atomic<bool> invalid{false};
+  parallel_for(0, expected, [&](std::size_t begin, std::size_t end) {
+    bool valid = true;
+    for (std::size_t t = begin; t < end; ++t) {
+      const unsigned char* record = bytes + 84 + 50 * t + 12;  // skip the stored normal
+      for (int i = 0; i < 9; ++i) {
+        const double x = load_f32(record + 4 * i);
+        raw.xyz[9 * t + i] = x;
+        if (!std::isfinite(x) || std::abs(x) > kMaxCoordinate) valid = false;
+      }
+      for (int corner = 0; corner < 3; ++corner) raw.triangles[3 * t + corner] = static_cast<int>(3 * t + corner);
     }
-  }
+    if (!valid) invalid.store(true, std::memory_order_relaxed);
+  }, kPiece);
+  if (invalid.load(std::memory_order_relaxed))
+    for (std::uint64_t t = 0; t < expected; ++t)
+      for (int corner = 0; corner < 3; ++corner)
+        check_coordinates(path, &raw.xyz[9 * t + 3 * corner], [&] { return "triangle " + std::to_string(t + 1); });
   return raw;
 }
 
@@ -428,6 +454,21 @@ std::size_t ply_type_size(PlyType type) {
 
 bool ply_type_is_integer(PlyType type) { return type != PlyType::f32 && type != PlyType::f64; }
 
+// A binary little-endian value as a double.
+double load_ply_value(PlyType type, const unsigned char* p) {
+  switch (type) {
+    case PlyType::i8: return static_cast<std::int8_t>(p[0]);
+    case PlyType::u8: return p[0];
+    case PlyType::i16: return static_cast<std::int16_t>(p[0] | p[1] << 8);
+    case PlyType::u16: return static_cast<std::uint16_t>(p[0] | p[1] << 8);
+    case PlyType::i32: return static_cast<std::int32_t>(load_u32(p));
+    case PlyType::u32: return load_u32(p);
+    case PlyType::f32: return load_f32(p);
+    case PlyType::f64: return load_f64(p);
+  }
+  return 0;
+}
+
 struct PlyProperty {
   std::string name;
   bool is_list = false;
@@ -457,18 +498,8 @@ class PlyBody {
     }
     const std::size_t size = ply_type_size(type);
     if (body_.size() - pos_ < size) return ReadStatus::end;
-    const auto* p = reinterpret_cast<const unsigned char*>(body_.data()) + pos_;
+    value = load_ply_value(type, reinterpret_cast<const unsigned char*>(body_.data()) + pos_);
     pos_ += size;
-    switch (type) {
-      case PlyType::i8: value = static_cast<std::int8_t>(p[0]); break;
-      case PlyType::u8: value = p[0]; break;
-      case PlyType::i16: value = static_cast<std::int16_t>(p[0] | p[1] << 8); break;
-      case PlyType::u16: value = static_cast<std::uint16_t>(p[0] | p[1] << 8); break;
-      case PlyType::i32: value = static_cast<std::int32_t>(load_u32(p)); break;
-      case PlyType::u32: value = load_u32(p); break;
-      case PlyType::f32: value = load_f32(p); break;
-      case PlyType::f64: value = load_f64(p); break;
-    }
     return ReadStatus::ok;
   }
 
@@ -548,6 +579,80 @@ void check_ply_counts(const std::string& path, const std::vector<PlyElement>& el
     check_triangle_count(path, triangles, true);
     if (!complete) return;
   }
+}
+
+// A binary PLY of triangles whose rows have fixed sizes: every element's properties are
+// values, but for the face element's index list, and every face has three corners (what flank
+// and most tools write). Its rows lie at known offsets and are read side by side. Anything
+// else, or anything amiss (fewer bytes than the rows need, a polygon, an index out of range, a
+// point not finite or out of range, a count over flank's limits), gives nothing: the general
+// reader then reads the file and names the problem.
+std::optional<RawMesh> parse_ply_triangles(std::string_view body, const std::vector<PlyElement>& elements,
+                                           const PlyElement* vertex_element, const PlyElement* face_element,
+                                           const int xyz_property[3], int index_property) {
+  if (!face_element || face_element->count == 0) return std::nullopt;
+  if (vertex_element->count > kMaxVertices || face_element->count > kMaxTriangles) return std::nullopt;
+  // Each element's row size and first row; for the vertex element, where x, y and z lie in a
+  // row, for the face element where the count and the indices do.
+  std::uint64_t offset = 0, vertex_start = 0, vertex_row = 0, face_start = 0, face_row = 0;
+  std::uint64_t xyz_at[3] = {0, 0, 0}, count_at = 0;
+  for (const PlyElement& element : elements) {
+    std::uint64_t row = 0;
+    for (std::size_t q = 0; q < element.properties.size(); ++q) {
+      const PlyProperty& property = element.properties[q];
+      if (&element == vertex_element)
+        for (int k = 0; k < 3; ++k)
+          if (xyz_property[k] == static_cast<int>(q)) xyz_at[k] = row;
+      if (!property.is_list) {
+        row += ply_type_size(property.type);
+        continue;
+      }
+      if (&element != face_element || static_cast<int>(q) != index_property ||
+          !ply_type_is_integer(property.type))
+        return std::nullopt;
+      count_at = row;
+      row += ply_type_size(property.count_type) + 3 * ply_type_size(property.type);
+    }
+    if (&element == vertex_element) vertex_start = offset, vertex_row = row;
+    if (&element == face_element) face_start = offset, face_row = row;
+    if (row > 0 && static_cast<std::uint64_t>(element.count) > (body.size() - offset) / row) return std::nullopt;
+    offset += row * static_cast<std::uint64_t>(element.count);
+  }
+  const PlyProperty& list = face_element->properties[static_cast<std::size_t>(index_property)];
+  const std::uint64_t index_size = ply_type_size(list.type), indices_at = count_at + ply_type_size(list.count_type);
+  const auto* bytes = reinterpret_cast<const unsigned char*>(body.data());
+  const auto nv = static_cast<std::size_t>(vertex_element->count), nf = static_cast<std::size_t>(face_element->count);
+  RawMesh raw;
+  raw.xyz.resize(3 * nv);
+  raw.triangles.resize(3 * nf);
+  std::atomic<bool> amiss{false};
+  PlyType xyz_type[3];
+  for (int k = 0; k < 3; ++k) xyz_type[k] = vertex_element->properties[static_cast<std::size_t>(xyz_property[k])].type;
+  parallel_for(0, nv, [&](std::size_t begin, std::size_t end) {
+    bool fine = true;
+    for (std::size_t v = begin; v < end; ++v)
+      for (int k = 0; k < 3; ++k) {
+        const double x = load_ply_value(xyz_type[k], bytes + vertex_start + vertex_row * v + xyz_at[k]);
+        raw.xyz[3 * v + static_cast<std::size_t>(k)] = x;
+        if (!std::isfinite(x) || std::abs(x) > kMaxCoordinate) fine = false;
+      }
+    if (!fine) amiss.store(true, std::memory_order_relaxed);
+  }, kPiece);
+  parallel_for(0, nf, [&](std::size_t begin, std::size_t end) {
+    bool fine = true;
+    for (std::size_t f = begin; f < end; ++f) {
+      const unsigned char* row = bytes + face_start + face_row * f;
+      if (load_ply_value(list.count_type, row + count_at) != 3) fine = false;
+      for (std::size_t k = 0; k < 3; ++k) {
+        const double index = load_ply_value(list.type, row + indices_at + index_size * k);
+        if (!(index >= 0 && index < static_cast<double>(nv))) fine = false;
+        raw.triangles[3 * f + k] = fine ? static_cast<int>(index) : 0;
+      }
+    }
+    if (!fine) amiss.store(true, std::memory_order_relaxed);
+  }, kPiece);
+  if (amiss.load(std::memory_order_relaxed)) return std::nullopt;
+  return raw;
 }
 
 RawMesh parse_ply(const std::string& path, std::string_view data, std::string& format) {
@@ -649,6 +754,10 @@ RawMesh parse_ply(const std::string& path, std::string_view data, std::string& f
   if (!vertex_element || vertex_element->count == 0) fail(path, "empty mesh (no vertices)");
 
   // Body.
+  if (binary)
+    if (std::optional<RawMesh> raw = parse_ply_triangles(data.substr(pos), elements, vertex_element, face_element,
+                                                         xyz_property, index_property))
+      return std::move(*raw);
   PlyBody body(data.substr(pos), binary);
   check_ply_counts(path, elements, vertex_element, face_element, index_property, body);
   RawMesh raw;
@@ -726,6 +835,48 @@ RawMesh parse_ply(const std::string& path, std::string_view data, std::string& f
 
 // ------------------------------------------------------------------------- validate and repair
 
+// MurmurHash3's 64-bit finalizer: a bijection that spreads every input bit over the output.
+std::uint64_t mix_bits(std::uint64_t h) {
+  h ^= h >> 33;
+  h *= 0xff51afd7ed558ccdULL;
+  h ^= h >> 33;
+  h *= 0xc4ceb9fe1a85ec53ULL;
+  return h ^ (h >> 33);
+}
+
+// Calls run(first, last) on each run of equal keys in `sorted` (each run whole in one call;
+// a piece takes the runs that start in it) and returns the sum of what the calls return.
+template <class Sum, class Item, class Run>
+Sum sum_over_runs(Item* sorted, std::size_t n, const Run& run) {
+  const std::size_t pieces = piece_count(n);
+  std::vector<Sum> sums(pieces, Sum{});
+  const auto run_start = [&](std::size_t i) {
+    while (i > 0 && i < n && sorted[i].key == sorted[i - 1].key) ++i;
+    return i;
+  };
+  for_each_piece(n, pieces, [&](std::size_t c, std::size_t begin, std::size_t end) {
+    const std::size_t stop = run_start(end);
+    for (std::size_t i = run_start(begin); i < stop;) {
+      std::size_t j = i + 1;
+      while (j < n && sorted[j].key == sorted[i].key) ++j;
+      sums[c] += run(sorted + i, sorted + j);
+      i = j;
+    }
+  });
+  Sum total{};
+  for (const Sum& sum : sums) total += sum;
+  return total;
+}
+
+struct EdgeCounts {
+  int boundary = 0;      // edges of one face
+  int non_manifold = 0;  // edges of three or more
+  EdgeCounts& operator+=(const EdgeCounts& o) {
+    boundary += o.boundary, non_manifold += o.non_manifold;
+    return *this;
+  }
+};
+
 struct UnionFind {
   std::vector<int> parent;
   explicit UnionFind(int n) : parent(n) { std::iota(parent.begin(), parent.end(), 0); }
@@ -744,18 +895,32 @@ struct UnionFind {
 // turn every edge non-manifold (issue 14 rows 8, 9): a part written twice reads as the part.
 int drop_duplicate_faces(std::vector<int>& triangles) {
   const std::size_t nf = triangles.size() / 3;
-  std::vector<std::array<int, 3>> key(nf);
-  for (std::size_t f = 0; f < nf; ++f) {
-    std::copy_n(triangles.begin() + static_cast<std::ptrdiff_t>(3 * f), 3, key[f].begin());
-    std::sort(key[f].begin(), key[f].end());
-  }
-  std::vector<int> order(nf);
-  std::iota(order.begin(), order.end(), 0);
-  parallel_sort(order.begin(), order.end(), [&](int a, int b) { return key[a] != key[b] ? key[a] < key[b] : a < b; });
+  // Faces sorted by a 32-bit hash of their sorted vertices, then by index (as the points are).
+  Buffer<std::array<int, 3>> vertices(nf);
+  Buffer<KeyedIndex> order(nf);
+  parallel_for(0, nf, [&](std::size_t begin, std::size_t end) {
+    for (std::size_t f = begin; f < end; ++f) {
+      std::array<int, 3>& v = vertices[f];
+      std::copy_n(triangles.begin() + static_cast<std::ptrdiff_t>(3 * f), 3, v.begin());
+      std::sort(v.begin(), v.end());
+      const std::uint64_t h = (std::uint64_t{static_cast<std::uint32_t>(v[0])} * 0x9e3779b97f4a7c15ULL +
+                               std::uint64_t{static_cast<std::uint32_t>(v[1])} * 0xc2b2ae3d27d4eb4fULL +
+                               std::uint64_t{static_cast<std::uint32_t>(v[2])} * 0x165667b19e3779f9ULL);
+      order[f] = {mix_bits(h) >> 32, static_cast<std::int32_t>(f)};
+    }
+  }, kPiece);
+  radix_sort_by_key(order, 32);
   std::vector<char> duplicate(nf, 0);
-  int dropped = 0;
-  for (std::size_t i = 1; i < nf; ++i)
-    if (key[order[i]] == key[order[i - 1]]) duplicate[order[i]] = 1, ++dropped;
+  const int dropped = sum_over_runs<int>(order.data(), order.size(), [&](KeyedIndex* first, KeyedIndex* last) {
+    if (last - first == 1) return 0;
+    std::sort(first, last, [&](const KeyedIndex& a, const KeyedIndex& b) {
+      return vertices[a.index] != vertices[b.index] ? vertices[a.index] < vertices[b.index] : a.index < b.index;
+    });
+    int copies = 0;
+    for (const KeyedIndex* k = first + 1; k < last; ++k)
+      if (vertices[k->index] == vertices[(k - 1)->index]) duplicate[k->index] = 1, ++copies;
+    return copies;
+  });
   if (dropped == 0) return 0;
   std::size_t out = 0;
   for (std::size_t f = 0; f < nf; ++f)
@@ -778,69 +943,121 @@ LoadedMesh repair(const std::string& path, RawMesh raw, std::string format,
   if (nt == 0) fail(path, "no triangles (" + std::to_string(nv) + " vertices, no faces)");
 
   // Weld exact duplicates onto the first occurrence, so a clean file keeps its numbering.
-  for (double& x : raw.xyz) x += 0.0;  // −0 → +0: equal coordinates compare equal
   const auto coord = [&](int v) { return raw.xyz.data() + 3 * static_cast<std::size_t>(v); };
-  std::vector<int> order(nv);
-  std::iota(order.begin(), order.end(), 0);
-  parallel_sort(order.begin(), order.end(), [&](int a, int b) {
-    const double *p = coord(a), *q = coord(b);
-    return p[0] != q[0] ? p[0] < q[0] : p[1] != q[1] ? p[1] < q[1] : p[2] != q[2] ? p[2] < q[2] : a < b;
+  // Points sorted by their weld hash, then by index: the copies of a point are adjacent, its
+  // first occurrence first. Where unequal points share a hash, their run is sorted by
+  // coordinates, then index.
+  Buffer<KeyedIndex> order(static_cast<std::size_t>(nv));
+  parallel_for(0, static_cast<std::size_t>(nv), [&](std::size_t begin, std::size_t end) {
+    for (std::size_t v = begin; v < end; ++v) {
+      double* p = coord(static_cast<int>(v));
+      for (int k = 0; k < 3; ++k) p[k] += 0.0;  // −0 → +0: equal coordinates compare equal
+      order[v] = {weld_hash(p), static_cast<std::int32_t>(v)};
+    }
+  }, kPiece);
+  radix_sort_by_key(order, 32);
+  std::vector<int> representative(static_cast<std::size_t>(nv));
+  const auto same_point = [&](int a, int b) { return std::equal(coord(a), coord(a) + 3, coord(b)); };
+  const int unique = sum_over_runs<int>(order.data(), order.size(), [&](KeyedIndex* first, KeyedIndex* last) {
+    if (std::all_of(first + 1, last, [&](const KeyedIndex& k) { return same_point(k.index, first->index); })) {
+      for (const KeyedIndex* k = first; k < last; ++k) representative[k->index] = first->index;
+      return 1;
+    }
+    std::sort(first, last, [&](const KeyedIndex& a, const KeyedIndex& b) {
+      const double *p = coord(a.index), *q = coord(b.index);
+      return p[0] != q[0] ? p[0] < q[0] : p[1] != q[1] ? p[1] < q[1] : p[2] != q[2] ? p[2] < q[2] : a.index < b.index;
+    });
+    int points = 0;
+    for (const KeyedIndex* k = first; k < last; ++k) {
+      const bool same = k > first && same_point(k->index, (k - 1)->index);
+      points += same ? 0 : 1;
+      representative[k->index] = same ? representative[(k - 1)->index] : k->index;
+    }
+    return points;
   });
-  std::vector<int> representative(nv);
-  int unique = 0;
-  for (int i = 0; i < nv; ++i) {
-    const bool same = i > 0 && std::equal(coord(order[i]), coord(order[i]) + 3, coord(order[i - 1]));
-    if (!same) ++unique;
-    representative[order[i]] = same ? representative[order[i - 1]] : order[i];
-  }
   report.welded_vertices = nv - unique;
 
-  // Drop degenerate faces: repeated (welded) index or area ≤ 1e-14 · diagonal².
-  Vec3 lo = Vec3::Constant(std::numeric_limits<double>::infinity()), hi = -lo;
-  for (int i : raw.triangles) {
-    const Vec3 p(coord(i)[0], coord(i)[1], coord(i)[2]);
-    lo = lo.cwiseMin(p), hi = hi.cwiseMax(p);
-  }
+  // Drop degenerate faces: repeated (welded) index or area ≤ 1e-14 · diagonal². The box is
+  // of the points the triangles use; min and max are exact, so pieces' boxes make the same.
+  const std::size_t corner_pieces = piece_count(raw.triangles.size());
+  std::vector<Vec3> piece_lo(corner_pieces, Vec3::Constant(std::numeric_limits<double>::infinity()));
+  std::vector<Vec3> piece_hi(corner_pieces, -piece_lo[0]);
+  for_each_piece(raw.triangles.size(), corner_pieces, [&](std::size_t c, std::size_t begin, std::size_t end) {
+    Vec3 lo = piece_lo[c], hi = piece_hi[c];
+    for (std::size_t i = begin; i < end; ++i) {
+      const Vec3 p(coord(raw.triangles[i])[0], coord(raw.triangles[i])[1], coord(raw.triangles[i])[2]);
+      lo = lo.cwiseMin(p), hi = hi.cwiseMax(p);
+    }
+    piece_lo[c] = lo, piece_hi[c] = hi;
+  });
+  Vec3 lo = piece_lo[0], hi = piece_hi[0];
+  for (std::size_t c = 1; c < corner_pieces; ++c) lo = lo.cwiseMin(piece_lo[c]), hi = hi.cwiseMax(piece_hi[c]);
   const double area_floor = kDegenerateArea * (hi - lo).squaredNorm();
-  std::vector<int> kept;
-  kept.reserve(raw.triangles.size());
-  for (int t = 0; t < nt; ++t) {
-    const int a = representative[raw.triangles[3 * t]];
-    const int b = representative[raw.triangles[3 * t + 1]];
-    const int c = representative[raw.triangles[3 * t + 2]];
-    bool degenerate = a == b || b == c || a == c;
-    if (!degenerate) {
-      const Vec3 pa(coord(a)[0], coord(a)[1], coord(a)[2]);
-      const Vec3 pb(coord(b)[0], coord(b)[1], coord(b)[2]);
-      const Vec3 pc(coord(c)[0], coord(c)[1], coord(c)[2]);
-      degenerate = 0.5 * (pb - pa).cross(pc - pa).norm() <= area_floor;
+  const auto welded = [&](int t) {
+    return std::array<int, 3>{representative[raw.triangles[3 * t]], representative[raw.triangles[3 * t + 1]],
+                              representative[raw.triangles[3 * t + 2]]};
+  };
+  Buffer<char> degenerate(static_cast<std::size_t>(nt));
+  const std::size_t face_pieces = piece_count(static_cast<std::size_t>(nt));
+  std::vector<int> kept_before(face_pieces + 1, 0);  // kept faces before piece c, once summed
+  for_each_piece(static_cast<std::size_t>(nt), face_pieces, [&](std::size_t c, std::size_t begin, std::size_t end) {
+    for (std::size_t t = begin; t < end; ++t) {
+      const auto [a, b, c3] = welded(static_cast<int>(t));
+      bool bad = a == b || b == c3 || a == c3;
+      if (!bad) {
+        const Vec3 pa(coord(a)[0], coord(a)[1], coord(a)[2]);
+        const Vec3 pb(coord(b)[0], coord(b)[1], coord(b)[2]);
+        const Vec3 pc(coord(c3)[0], coord(c3)[1], coord(c3)[2]);
+        bad = 0.5 * (pb - pa).cross(pc - pa).norm() <= area_floor;
+      }
+      degenerate[t] = bad ? 1 : 0;
+      kept_before[c + 1] += bad ? 0 : 1;
     }
-    if (degenerate) {
-      ++report.degenerate_faces;
-      continue;
-    }
-    kept.insert(kept.end(), {a, b, c});
-  }
-  if (kept.empty())
+  });
+  std::partial_sum(kept_before.begin(), kept_before.end(), kept_before.begin());
+  report.degenerate_faces = nt - kept_before.back();
+  if (kept_before.back() == 0)
     fail(path, nt == 1 ? std::string("the only triangle is degenerate")
                        : "all " + std::to_string(nt) + " triangles are degenerate");
+  std::vector<int> kept(3 * static_cast<std::size_t>(kept_before.back()));
+  for_each_piece(static_cast<std::size_t>(nt), face_pieces, [&](std::size_t c, std::size_t begin, std::size_t end) {
+    auto next = kept.begin() + 3 * static_cast<std::ptrdiff_t>(kept_before[c]);
+    for (std::size_t t = begin; t < end; ++t)
+      if (!degenerate[t]) next = std::ranges::copy(welded(static_cast<int>(t)), next).out;
+  });
   report.duplicate_faces = drop_duplicate_faces(kept);
   const int nf = static_cast<int>(kept.size() / 3);
 
   // Remove unused vertices, keeping the file's order.
-  std::vector<int> new_index(nv, -1);
-  for (int v : kept) new_index[v] = 0;
-  int used = 0;
-  for (int v = 0; v < nv; ++v)
-    if (new_index[v] == 0) new_index[v] = used++;
-  report.unused_vertices = unique - used;
+  std::vector<char> used(static_cast<std::size_t>(nv), 0);
+  parallel_for(0, kept.size(), [&](std::size_t begin, std::size_t end) {
+    for (std::size_t i = begin; i < end; ++i) std::atomic_ref<char>(used[kept[i]]).store(1, std::memory_order_relaxed);
+  }, 3 * kPiece);
+  const std::size_t vertex_pieces = piece_count(static_cast<std::size_t>(nv));
+  std::vector<int> used_before(vertex_pieces + 1, 0);
+  for_each_piece(static_cast<std::size_t>(nv), vertex_pieces, [&](std::size_t c, std::size_t begin, std::size_t end) {
+    used_before[c + 1] = static_cast<int>(std::count(used.begin() + static_cast<std::ptrdiff_t>(begin),
+                                                     used.begin() + static_cast<std::ptrdiff_t>(end), 1));
+  });
+  std::partial_sum(used_before.begin(), used_before.end(), used_before.begin());
+  const int used_count = used_before.back();
+  report.unused_vertices = unique - used_count;
   Mesh& mesh = out.mesh;
-  mesh.V.resize(used, 3);
-  for (int v = 0; v < nv; ++v)
-    if (new_index[v] >= 0) mesh.V.row(new_index[v]) << coord(v)[0], coord(v)[1], coord(v)[2];
+  mesh.V.resize(used_count, 3);
+  std::vector<int> new_index(static_cast<std::size_t>(nv), -1);
+  for_each_piece(static_cast<std::size_t>(nv), vertex_pieces, [&](std::size_t c, std::size_t begin, std::size_t end) {
+    int next = used_before[c];
+    for (std::size_t v = begin; v < end; ++v)
+      if (used[v]) {
+        new_index[v] = next;
+        mesh.V.row(next++) << coord(static_cast<int>(v))[0], coord(static_cast<int>(v))[1], coord(static_cast<int>(v))[2];
+      }
+  });
   mesh.F.resize(nf, 3);
-  for (int f = 0; f < nf; ++f)
-    for (int k = 0; k < 3; ++k) mesh.F(f, k) = new_index[kept[3 * f + k]];
+  parallel_for(0, static_cast<std::size_t>(nf), [&](std::size_t begin, std::size_t end) {
+    for (std::size_t f = begin; f < end; ++f)
+      for (int k = 0; k < 3; ++k) mesh.F(static_cast<Eigen::Index>(f), k) = new_index[kept[3 * f + k]];
+  }, kPiece);
 
   // Edges: the 3F edge slots sorted by undirected key, then by face; a run of equal keys is
   // one edge (a face has three different edges: it is not degenerate).
@@ -854,7 +1071,6 @@ LoadedMesh repair(const std::string& path, RawMesh raw, std::string format,
     const int f = slots[i].index / 3, k = slots[i].index % 3;
     return HalfEdge{slots[i].key, f, mesh.F(f, k) < mesh.F(f, (k + 1) % 3)};
   };
-  UnionFind components(nf);
   // Manifold edges carry the orientation constraint: `same` means both faces run the edge in
   // the same direction, i.e. one of them must be flipped.
   // A face has at most one neighbour across each of its three edges.
@@ -871,51 +1087,59 @@ LoadedMesh repair(const std::string& path, RawMesh raw, std::string format,
     const std::size_t n = j - i;
     if (n == 1) ++report.boundary_edges;
     if (n > 2) ++report.non_manifold_edges;
-    const HalfEdge first = half_edge(i);
-    for (std::size_t k = i + 1; k < j; ++k) components.unite(first.face, half_edge(k).face);
     if (n == 2) {
-      const HalfEdge second = half_edge(i + 1);
+      const HalfEdge first = half_edge(i), second = half_edge(i + 1);
       const bool same = first.forward == second.forward;
       link(first.face, second.face, same);
       link(second.face, first.face, same);
     }
     i = j;
   }
-  for (int f = 0; f < nf; ++f)
-    if (components.find(f) == f) ++report.components;
+
+  // Components, joined across every shared edge, beside the orientation's search.
+  const auto count_components = [&] {
+    UnionFind components(nf);
+    for (std::size_t i = 1; i < slots.size(); ++i)
+      if (slots[i].key == slots[i - 1].key) components.unite(slots[i - 1].index / 3, slots[i].index / 3);
+    for (int f = 0; f < nf; ++f)
+      if (components.find(f) == f) ++report.components;
+  };
 
   // Consistent orientation by BFS over manifold edges; per patch, keep the orientation that
   // the larger area had in the file (ties: the patch's first face keeps its orientation).
-  const VecX area = face_areas(mesh);
-  std::vector<signed char> flip(nf, -1);
-  std::vector<int> queue;
-  for (int seed = 0; seed < nf; ++seed) {
-    if (flip[seed] >= 0) continue;
-    queue.assign(1, seed);
-    flip[seed] = 0;
-    for (std::size_t head = 0; head < queue.size(); ++head) {
-      const int f = queue[head];
-      for (int k = 0; k < neighbour_count[f]; ++k) {
-        const int g = neighbours[f][k].face;
-        const signed char want = static_cast<signed char>(flip[f] ^ (neighbours[f][k].same ? 1 : 0));
-        if (flip[g] < 0) {
-          flip[g] = want;
-          queue.push_back(g);
-        } else if (flip[g] != want) {
-          report.orientable = false;
+  const auto orient = [&] {
+    const VecX area = face_areas(mesh);
+    std::vector<signed char> flip(nf, -1);
+    std::vector<int> queue;
+    for (int seed = 0; seed < nf; ++seed) {
+      if (flip[seed] >= 0) continue;
+      queue.assign(1, seed);
+      flip[seed] = 0;
+      for (std::size_t head = 0; head < queue.size(); ++head) {
+        const int f = queue[head];
+        for (int k = 0; k < neighbour_count[f]; ++k) {
+          const int g = neighbours[f][k].face;
+          const signed char want = static_cast<signed char>(flip[f] ^ (neighbours[f][k].same ? 1 : 0));
+          if (flip[g] < 0) {
+            flip[g] = want;
+            queue.push_back(g);
+          } else if (flip[g] != want) {
+            report.orientable = false;
+          }
         }
       }
+      double flipped_area = 0.0, kept_area = 0.0;
+      for (int f : queue) (flip[f] ? flipped_area : kept_area) += area(f);
+      if (flipped_area > kept_area)
+        for (int f : queue) flip[f] ^= 1;
     }
-    double flipped_area = 0.0, kept_area = 0.0;
-    for (int f : queue) (flip[f] ? flipped_area : kept_area) += area(f);
-    if (flipped_area > kept_area)
-      for (int f : queue) flip[f] ^= 1;
-  }
-  for (int f = 0; f < nf; ++f)
-    if (flip[f]) {
-      std::swap(mesh.F(f, 1), mesh.F(f, 2));
-      ++report.flipped_faces;
-    }
+    for (int f = 0; f < nf; ++f)
+      if (flip[f]) {
+        std::swap(mesh.F(f, 1), mesh.F(f, 2));
+        ++report.flipped_faces;
+      }
+  };
+  run_beside(count_components, orient);
   if (options.flip) mesh.F.col(1).swap(mesh.F.col(2));
   return out;
 }
@@ -929,6 +1153,14 @@ bool has_obj_vertex_line(std::string_view data) {
 }
 
 }  // namespace
+
+// The coordinates' bits, each times an odd constant, summed and mixed; the high half.
+std::uint32_t weld_hash(const double point[3]) {
+  const std::uint64_t h = std::bit_cast<std::uint64_t>(point[0]) * 0x9e3779b97f4a7c15ULL +
+                          std::bit_cast<std::uint64_t>(point[1]) * 0xc2b2ae3d27d4eb4fULL +
+                          std::bit_cast<std::uint64_t>(point[2]) * 0x165667b19e3779f9ULL;
+  return static_cast<std::uint32_t>(mix_bits(h) >> 32);
+}
 
 LoadedMesh repair_triangles(const std::string& name, std::vector<double> xyz,
                             std::vector<int> triangles, std::string format,

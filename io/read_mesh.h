@@ -69,6 +69,11 @@ LoadedMesh read_mesh(const std::string& path, const ReadOptions& options = {});
 LoadedMesh read_mesh_bytes(const std::string& name, std::string_view bytes,
                            const ReadOptions& options = {});
 
+// The hash the repair's weld sorts points by: equal points share it (−0 taken as +0 first),
+// unequal ones seldom do, and then are told apart by their coordinates. Here for the test of
+// that case.
+std::uint32_t weld_hash(const double point[3]);
+
 // The same validation and repair from a triangle soup (3 coordinates per vertex, 3 indices per
 // triangle, indices in range): what the CAD reader makes of a tessellation. `format` is
 // reported as given.

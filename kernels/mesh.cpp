@@ -4,6 +4,8 @@
 #include <cassert>
 #include <cstdint>
 #include <numeric>
+#include <span>
+#include <utility>
 #include <unordered_map>
 #include <vector>
 
@@ -52,6 +54,50 @@ VecX vertex_areas(const Mesh& mesh) {
 }
 
 double total_area(const Mesh& mesh) { return face_areas(mesh).sum(); }
+
+void radix_sort_by_key(std::span<KeyedIndex> items, int key_bits) {
+  constexpr int kDigitBits = 11;
+  constexpr std::size_t kBuckets = std::size_t{1} << kDigitBits;
+  constexpr std::size_t kChunk = 16384;  // below two of these, one chunk: a fork costs more
+  const std::size_t n = items.size();
+  if (n < 2) return;
+  const std::size_t chunks =
+      std::clamp<std::size_t>(std::min<std::size_t>(n / kChunk, static_cast<std::size_t>(max_threads())), 1, 8);
+  const auto bound = [&](std::size_t c) { return n * c / chunks; };
+  Buffer<KeyedIndex> spare(n);
+  std::span<KeyedIndex> from = items, to{spare.data(), n};
+  // count[c][d]: chunk c's items with digit d; then where chunk c puts its next item of digit d.
+  std::vector<std::size_t> count(chunks * kBuckets);
+  for (int shift = 0; shift < key_bits; shift += kDigitBits) {
+    std::fill(count.begin(), count.end(), 0);
+    // Each loop's bounds and spans are locals: stored counts could alias captured ones.
+    parallel_invoke_each(chunks, [&](std::size_t c) {
+      std::size_t* h = &count[c * kBuckets];
+      const KeyedIndex *i = from.data() + bound(c), *end = from.data() + bound(c + 1);
+      for (; i < end; ++i) ++h[(i->key >> shift) & (kBuckets - 1)];
+    });
+    std::size_t running = 0;
+    bool one_digit = false;
+    for (std::size_t d = 0; d < kBuckets; ++d) {
+      const std::size_t first = running;
+      for (std::size_t c = 0; c < chunks; ++c) running += std::exchange(count[c * kBuckets + d], running);
+      one_digit = one_digit || running - first == n;
+    }
+    if (one_digit) continue;
+    parallel_invoke_each(chunks, [&](std::size_t c) {
+      std::size_t* next = &count[c * kBuckets];
+      KeyedIndex* out = to.data();
+      const KeyedIndex *i = from.data() + bound(c), *end = from.data() + bound(c + 1);
+      for (; i < end; ++i) out[next[(i->key >> shift) & (kBuckets - 1)]++] = *i;
+    });
+    std::swap(from, to);
+  }
+  if (from.data() != items.data())
+    parallel_for(0, n, [&](std::size_t begin, std::size_t end) {
+      std::copy(from.begin() + static_cast<std::ptrdiff_t>(begin), from.begin() + static_cast<std::ptrdiff_t>(end),
+                items.begin() + static_cast<std::ptrdiff_t>(begin));
+    }, kChunk);
+}
 
 // Not a comparison sort: the slots are counted into buckets by their edge's lower vertex in
 // slot order (so each bucket holds its slots in slot order), then each bucket, a vertex's

@@ -1,5 +1,6 @@
 // subdivide_midpoint: the finer re-mesh of the scaling ladder keeps the surface exactly.
 // sorted_edge_slots: the edges' order the index's boundary and adjacency are read from.
+// radix_sort_by_key: a stable sort, whatever the keys' width and the thread count.
 #include "kernels/mesh.h"
 
 #include <gtest/gtest.h>
@@ -103,6 +104,34 @@ TEST(SortedEdgeSlots, EqualStdSortOfTheKeyedSlots) {
           << m.face_count() << " faces, " << threads << " threads";
     }
   }
+}
+
+// Against std::stable_sort by key alone: random keys of several widths (an 11-bit pass, a
+// pass that is one digit throughout and skipped, all 64 bits), few keys or many, items in
+// index order or not, sizes around the chunk (16384 items), at 1 to 3 threads.
+TEST(RadixSortByKey, IsTheStableSortByKey) {
+  std::mt19937_64 rng(11);
+  for (const int bits : {1, 11, 12, 32, 33, 64})
+    for (const std::size_t n : {std::size_t{0}, std::size_t{1}, std::size_t{100}, std::size_t{16384},
+                                std::size_t{2 * 16384 + 5}, std::size_t{100000}})
+      for (const bool shuffled : {false, true}) {
+        std::vector<KeyedIndex> items(n);
+        for (std::size_t i = 0; i < n; ++i) {
+          std::uint64_t key = bits == 64 ? rng() : rng() & ((std::uint64_t{1} << bits) - 1);
+          if (bits == 33) key &= ~(std::uint64_t{0x7ff} << 11);  // the second digit: zero throughout
+          items[i] = {key, static_cast<std::int32_t>(i)};
+        }
+        if (shuffled) std::shuffle(items.begin(), items.end(), rng);
+        std::vector<KeyedIndex> want = items;
+        std::stable_sort(want.begin(), want.end(), [](const KeyedIndex& a, const KeyedIndex& b) { return a.key < b.key; });
+        for (const int threads : {1, 2, 3}) {
+          const ThreadLimit limit(threads);
+          std::vector<KeyedIndex> got = items;
+          radix_sort_by_key(got, bits);
+          EXPECT_TRUE(got == want) << bits << " bits, " << n << " items, shuffled " << shuffled << ", "
+                                   << threads << " threads";
+        }
+      }
 }
 
 }  // namespace

@@ -7,17 +7,22 @@
 
 #include <algorithm>
 #include <array>
+#include <charconv>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <limits>
+#include <map>
 #include <numbers>
 #include <random>
 #include <sstream>
 #include <string>
 #include <tuple>
+#include <unordered_map>
+#include <utility>
 #include <vector>
 
 #include "kernels/parallel.h"
@@ -347,6 +352,184 @@ TEST_F(ReadMesh, RepairIsTheSameWhateverTheThreadCount) {
   EXPECT_EQ(read[0].mesh.F, read[1].mesh.F);
 }
 
+// The weld keeps each point's first occurrence, in the file's order, also where distinct
+// points share a weld hash (two found by a birthday search). In the soup the pair's copies
+// alternate through the triangles, and one more point comes as +0 and as −0: the mesh's
+// vertices are the points in order of first appearance, each face keeps its corners'
+// coordinates, at one thread and at two.
+TEST_F(ReadMesh, WeldKeepsFirstOccurrencesWhereHashesCollide) {
+  using Point = std::array<double, 3>;
+  std::mt19937_64 rng(5);
+  const auto random_point = [&] {
+    return Point{static_cast<double>(rng() % 100000), static_cast<double>(rng() % 100000),
+                 static_cast<double>(rng() % 100000)};
+  };
+  std::unordered_map<std::uint32_t, Point> seen;
+  Point a{}, b{};
+  for (bool found = false; !found;) {
+    const Point p = random_point();
+    const auto [it, fresh] = seen.emplace(weld_hash(p.data()), p);
+    if (!fresh && it->second != p) a = it->second, b = p, found = true;
+  }
+  ASSERT_EQ(weld_hash(a.data()), weld_hash(b.data()));
+  std::vector<Point> corners;
+  for (int i = 0; i < 40; ++i) {
+    const Point c = random_point(), d = random_point();
+    if (i % 2) corners.insert(corners.end(), {a, c, b});
+    else corners.insert(corners.end(), {b, d, a});
+    if (i % 7 == 0) corners.insert(corners.end(), {c, {0.0, 1.0, i % 3 ? 0.0 : -0.0}, d});
+  }
+  std::vector<double> xyz;
+  std::vector<int> triangles;
+  std::map<Point, int> first;  // −0 and +0 compare equal: one key
+  std::vector<Point> want;     // the points in order of first appearance
+  for (const Point& p : corners) {
+    triangles.push_back(static_cast<int>(triangles.size()));
+    xyz.insert(xyz.end(), p.begin(), p.end());
+    if (first.emplace(p, static_cast<int>(want.size())).second) want.push_back(p);
+  }
+  for (const int threads : {1, 2}) {
+    const ThreadLimit limit(threads);
+    const LoadedMesh m = repair_triangles("soup", xyz, triangles, "soup", {});
+    EXPECT_EQ(m.report.welded_vertices, static_cast<int>(corners.size() - want.size()));
+    ASSERT_EQ(m.mesh.vertex_count(), static_cast<int>(want.size()));
+    for (int v = 0; v < m.mesh.vertex_count(); ++v)
+      for (int k = 0; k < 3; ++k) EXPECT_EQ(m.mesh.V(v, k), want[static_cast<std::size_t>(v)][k]) << v;
+    ASSERT_EQ(m.mesh.face_count(), static_cast<int>(corners.size() / 3));
+    for (int f = 0; f < m.mesh.face_count(); ++f) {  // the same corners, perhaps reoriented
+      std::array<int, 3> got{}, expected{};
+      for (int k = 0; k < 3; ++k) {
+        got[static_cast<std::size_t>(k)] = m.mesh.F(f, k);
+        expected[static_cast<std::size_t>(k)] = first.at(corners[static_cast<std::size_t>(3 * f + k)]);
+      }
+      std::sort(got.begin(), got.end());
+      std::sort(expected.begin(), expected.end());
+      EXPECT_EQ(got, expected) << "face " << f;
+    }
+  }
+}
+
+// A binary PLY of triangles, with other values in its rows and another element, is read row by
+// row in place (the rows have fixed sizes); it must read exactly as its ASCII twin, which the
+// general reader reads, for each value type. A quad, an index out of range, a negative index
+// or a point that is not finite send it to the general reader, which reads the quad and names
+// the problem.
+struct PlyTwin {
+  std::string ascii, binary;
+};
+PlyTwin ply_twin(int n, bool doubles, const char* count_type, const char* index_type,
+                 const std::function<void(int face, std::vector<int>& corners)>& edit_face = {},
+                 const std::function<void(int vertex, double& x)>& edit_x = {}) {
+  const std::string coordinate = doubles ? "double" : "float";
+  const auto header = [&](const char* format) {
+    return "ply\nformat " + std::string(format) + " 1.0\nelement vertex " + std::to_string((n + 1) * (n + 1)) +
+           "\nproperty " + coordinate + " x\nproperty uchar red\nproperty " + coordinate + " y\nproperty float nx\n" +
+           "property " + coordinate + " z\nelement material 2\nproperty int id\nelement face " +
+           std::to_string(2 * n * n) + "\nproperty uchar flags\nproperty list " + count_type + " " + index_type +
+           " vertex_indices\nproperty float quality\nend_header\n";
+  };
+  PlyTwin twin{header("ascii"), header("binary_little_endian")};
+  const auto text = [](double x) {
+    char buffer[64];
+    return std::string(buffer, std::to_chars(buffer, buffer + sizeof buffer, x).ptr);
+  };
+  const auto put_integer = [](std::string& s, const char* type, long long v) {
+    const std::string t = type;
+    const int bytes = t == "uchar" ? 1 : t == "ushort" ? 2 : 4;
+    for (int k = 0; k < bytes; ++k) s.push_back(static_cast<char>((static_cast<unsigned long long>(v) >> (8 * k)) & 0xff));
+  };
+  std::mt19937 rng(7);
+  for (int v = 0; v < (n + 1) * (n + 1); ++v) {
+    double p[3] = {v % (n + 1) + 0.25 * static_cast<float>(rng() % 1000) / 1000.0, static_cast<double>(v / (n + 1)),
+                   static_cast<float>(std::sin(0.1 * v))};
+    if (!doubles)
+      for (double& x : p) x = static_cast<float>(x);
+    if (edit_x) edit_x(v, p[0]);
+    twin.ascii += text(p[0]) + " 9 " + text(p[1]) + " 0.5 " + text(p[2]) + "\n";
+    for (int k = 0; k < 3; ++k) {
+      if (doubles) put_f64(twin.binary, p[k]);
+      else put_f32(twin.binary, static_cast<float>(p[k]));
+      if (k == 0) twin.binary.push_back(9);
+      if (k == 1) put_f32(twin.binary, 0.5f);
+    }
+  }
+  for (int id = 0; id < 2; ++id) {
+    twin.ascii += std::to_string(id) + "\n";
+    put_integer(twin.binary, "int", id);
+  }
+  for (int f = 0; f < 2 * n * n; ++f) {
+    const int i = f / 2 % n, j = f / 2 / n, a = j * (n + 1) + i, b = a + 1, c = a + n + 2, d = a + n + 1;
+    std::vector<int> corners = f % 2 ? std::vector<int>{a, c, d} : std::vector<int>{a, b, c};
+    if (edit_face) edit_face(f, corners);
+    twin.ascii += "1 " + std::to_string(corners.size());
+    twin.binary.push_back(1);
+    put_integer(twin.binary, count_type, static_cast<long long>(corners.size()));
+    for (const int v : corners) {
+      twin.ascii += " " + std::to_string(v);
+      put_integer(twin.binary, index_type, v);
+    }
+    twin.ascii += " 0.75\n";
+    put_f32(twin.binary, 0.75f);
+  }
+  return twin;
+}
+
+TEST_F(ReadMesh, BinaryTrianglePlyReadsAsItsAsciiTwin) {
+  const auto same = [](const LoadedMesh& x, const LoadedMesh& y) {
+    EXPECT_EQ(x.mesh.V, y.mesh.V);
+    EXPECT_EQ(x.mesh.F, y.mesh.F);
+    EXPECT_EQ(std::tie(x.report.input_vertices, x.report.input_faces, x.report.welded_vertices),
+              std::tie(y.report.input_vertices, y.report.input_faces, y.report.welded_vertices));
+  };
+  for (const bool doubles : {false, true})
+    for (const auto& [count_type, index_type] : {std::pair{"uchar", "int"}, std::pair{"int", "uint"}, std::pair{"uchar", "ushort"}})
+      for (const int threads : {1, 2}) {
+        SCOPED_TRACE(std::string(doubles ? "double" : "float") + " " + count_type + " " + index_type + " at " +
+                     std::to_string(threads) + " threads");
+        const ThreadLimit limit(threads);
+        const PlyTwin twin = ply_twin(120, doubles, count_type, index_type);  // 14.6k points, 28.8k faces
+        const LoadedMesh binary = read_mesh_bytes("twin.ply", twin.binary);
+        EXPECT_EQ(binary.report.format, "ply-binary");
+        EXPECT_EQ(binary.mesh.face_count(), 2 * 120 * 120);
+        same(binary, read_mesh_bytes("twin.ply", twin.ascii));
+      }
+
+  // A quad among the triangles: the general reader splits it, as in the ASCII file.
+  const PlyTwin quad = ply_twin(20, false, "uchar", "int", [](int f, std::vector<int>& corners) {
+    if (f == 101) corners.push_back(corners[0] + 1), std::swap(corners[1], corners[3]);
+  });
+  const LoadedMesh with_quad = read_mesh_bytes("quad.ply", quad.binary);
+  EXPECT_EQ(with_quad.report.input_faces, 2 * 20 * 20 + 1);
+  same(with_quad, read_mesh_bytes("quad.ply", quad.ascii));
+
+  const auto message = [](const std::string& bytes) {
+    try {
+      read_mesh_bytes("bad.ply", bytes);
+    } catch (const Error& e) {
+      return std::string(e.what());
+    }
+    return std::string("no error");
+  };
+  const int points = 21 * 21;
+  EXPECT_EQ(message(ply_twin(20, false, "uchar", "int", [&](int f, std::vector<int>& corners) {
+              if (f == 7) corners[1] = points;
+            }).binary),
+            "bad.ply: face 7 references vertex " + std::to_string(points) + " but the file has " +
+                std::to_string(points) + " vertices");
+  EXPECT_EQ(message(ply_twin(20, false, "uchar", "int", [](int f, std::vector<int>& corners) {
+              if (f == 9) corners[2] = -1;
+            }).binary),
+            "bad.ply: face 9 references vertex -1");
+  EXPECT_EQ(message(ply_twin(20, true, "uchar", "int", {}, [](int v, double& x) {
+              if (v == 123) x = std::numeric_limits<double>::infinity();
+            }).binary),
+            "bad.ply: non-finite coordinate at vertex 123");
+  EXPECT_EQ(message(ply_twin(20, true, "uchar", "int", {}, [](int v, double& x) {
+              if (v == 5) x = 1e41;
+            }).binary),
+            "bad.ply: coordinate out of range (|x| > 1e40) at vertex 5");
+}
+
 TEST_F(ReadMesh, FlipReversesEverythingAfterRepair) {
   ReadOptions options;
   options.flip = true;
@@ -464,6 +647,7 @@ TEST_F(ReadMesh, BadInputThrowsOneLineNamingTheFile) {
 TEST_F(ReadMesh, EveryPrefixThrowsOrReads) {
   read_every_prefix("prefix.stl", cube_binary_stl());
   read_every_prefix("prefix.ply", cube_binary_ply());
+  read_every_prefix("prefix_triangles.ply", ply_twin(3, false, "uchar", "int").binary);
   for (const char* name : {"cube_ascii.stl", "cube_quads.obj", "cube_ascii.ply"}) {
     std::ifstream in(kData + "/" + name, std::ios::binary);
     std::stringstream content;
