@@ -844,21 +844,23 @@ std::uint64_t mix_bits(std::uint64_t h) {
   return h ^ (h >> 33);
 }
 
-// Calls run(first, last) on each run of equal keys in `sorted` (each run whole in one call;
-// a piece takes the runs that start in it) and returns the sum of what the calls return.
+// Calls run(first, last) on each run of equal keys in `sorted` (each run whole in one call,
+// which may reorder it) and returns the sum of what the calls return. Pieces begin where runs
+// do, found before any piece runs.
 template <class Sum, class Item, class Run>
 Sum sum_over_runs(Item* sorted, std::size_t n, const Run& run) {
   const std::size_t pieces = piece_count(n);
-  std::vector<Sum> sums(pieces, Sum{});
-  const auto run_start = [&](std::size_t i) {
+  std::vector<std::size_t> start(pieces + 1, n);
+  for (std::size_t c = 0; c < pieces; ++c) {
+    std::size_t i = n * c / pieces;
     while (i > 0 && i < n && sorted[i].key == sorted[i - 1].key) ++i;
-    return i;
-  };
-  for_each_piece(n, pieces, [&](std::size_t c, std::size_t begin, std::size_t end) {
-    const std::size_t stop = run_start(end);
-    for (std::size_t i = run_start(begin); i < stop;) {
+    start[c] = i;
+  }
+  std::vector<Sum> sums(pieces, Sum{});
+  parallel_invoke_each(pieces, [&](std::size_t c) {
+    for (std::size_t i = start[c]; i < start[c + 1];) {
       std::size_t j = i + 1;
-      while (j < n && sorted[j].key == sorted[i].key) ++j;
+      while (j < start[c + 1] && sorted[j].key == sorted[i].key) ++j;
       sums[c] += run(sorted + i, sorted + j);
       i = j;
     }
