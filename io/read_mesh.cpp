@@ -870,11 +870,14 @@ Sum sum_over_runs(Item* sorted, std::size_t n, const Run& run) {
   return total;
 }
 
-struct EdgeCounts {
-  int boundary = 0;      // edges of one face
-  int non_manifold = 0;  // edges of three or more
-  EdgeCounts& operator+=(const EdgeCounts& o) {
-    boundary += o.boundary, non_manifold += o.non_manifold;
+// The edges' runs: how many are boundary edges (one face), and where each non-manifold edge's
+// (three faces or more) begins in the sorted slots, in order.
+struct EdgeRuns {
+  int boundary = 0;
+  std::vector<std::size_t> non_manifold;
+  EdgeRuns& operator+=(const EdgeRuns& o) {
+    boundary += o.boundary;
+    non_manifold.insert(non_manifold.end(), o.non_manifold.begin(), o.non_manifold.end());
     return *this;
   }
 };
@@ -1062,86 +1065,106 @@ LoadedMesh repair(const std::string& path, RawMesh raw, std::string format,
   }, kPiece);
 
   // Edges: the 3F edge slots sorted by undirected key, then by face; a run of equal keys is
-  // one edge (a face has three different edges: it is not degenerate).
+  // one edge (a face has three different edges: it is not degenerate). A manifold edge (a run
+  // of two) links its faces and carries the orientation constraint: `same` means both faces
+  // run the edge in the same direction, i.e. one of them must be flipped. A face lists its
+  // neighbours in the order of their edges' keys: the order the search below visits them in.
   const Buffer<KeyedIndex> slots = sorted_edge_slots(mesh);
-  struct HalfEdge {
-    std::uint64_t key;
-    int face;
-    bool forward;  // runs from the smaller to the larger index
+  const auto edge_key = [&](int f, int k) {
+    const auto u = static_cast<std::uint32_t>(mesh.F(f, k)), v = static_cast<std::uint32_t>(mesh.F(f, (k + 1) % 3));
+    return (std::uint64_t{std::min(u, v)} << 32) | std::max(u, v);
   };
-  const auto half_edge = [&](std::size_t i) {
-    const int f = slots[i].index / 3, k = slots[i].index % 3;
-    return HalfEdge{slots[i].key, f, mesh.F(f, k) < mesh.F(f, (k + 1) % 3)};
+  const auto forward = [&](int slot) {  // the slot's edge runs from the smaller to the larger index
+    const int f = slot / 3, k = slot % 3;
+    return mesh.F(f, k) < mesh.F(f, (k + 1) % 3);
   };
-  // Manifold edges carry the orientation constraint: `same` means both faces run the edge in
-  // the same direction, i.e. one of them must be flipped.
-  // A face has at most one neighbour across each of its three edges.
+  // Per slot, the face across its edge times two, plus one where `same`; -1 where the edge is
+  // not manifold.
+  Buffer<int> link(slots.size());
+  parallel_for(0, slots.size(), [&](std::size_t begin, std::size_t end) { std::fill(link.begin() + begin, link.begin() + end, -1); }, 3 * kPiece);
+  const EdgeRuns edges = sum_over_runs<EdgeRuns>(slots.data(), slots.size(), [&](const KeyedIndex* first,
+                                                                                   const KeyedIndex* last) {
+    EdgeRuns runs;
+    if (last - first == 1) runs.boundary = 1;
+    if (last - first > 2) runs.non_manifold.push_back(static_cast<std::size_t>(first - slots.data()));
+    if (last - first == 2) {
+      const int a = first->index, b = (first + 1)->index;
+      const int same = forward(a) == forward(b) ? 1 : 0;
+      link[static_cast<std::size_t>(a)] = 2 * (b / 3) + same;
+      link[static_cast<std::size_t>(b)] = 2 * (a / 3) + same;
+    }
+    return runs;
+  });
+  report.boundary_edges = edges.boundary;
+  report.non_manifold_edges = static_cast<int>(edges.non_manifold.size());
   struct Neighbour {
     int face = -1;
     bool same = false;
   };
   std::vector<std::array<Neighbour, 3>> neighbours(nf);
   std::vector<unsigned char> neighbour_count(nf, 0);
-  const auto link = [&](int f, int g, bool same) { neighbours[f][neighbour_count[f]++] = {g, same}; };
-  for (std::size_t i = 0; i < slots.size();) {
-    std::size_t j = i + 1;
-    while (j < slots.size() && slots[j].key == slots[i].key) ++j;
-    const std::size_t n = j - i;
-    if (n == 1) ++report.boundary_edges;
-    if (n > 2) ++report.non_manifold_edges;
-    if (n == 2) {
-      const HalfEdge first = half_edge(i), second = half_edge(i + 1);
-      const bool same = first.forward == second.forward;
-      link(first.face, second.face, same);
-      link(second.face, first.face, same);
+  parallel_for(0, static_cast<std::size_t>(nf), [&](std::size_t begin, std::size_t end) {
+    for (std::size_t f = begin; f < end; ++f) {
+      std::array<std::pair<std::uint64_t, int>, 3> mine{};  // edge key, link
+      int count = 0;
+      for (int k = 0; k < 3; ++k)
+        if (const int to = link[3 * f + static_cast<std::size_t>(k)]; to >= 0)
+          mine[static_cast<std::size_t>(count++)] = {edge_key(static_cast<int>(f), k), to};
+      for (int a = 1; a < count; ++a)  // by key: at most three
+        for (int b = a; b > 0 && mine[static_cast<std::size_t>(b)].first < mine[static_cast<std::size_t>(b - 1)].first; --b)
+          std::swap(mine[static_cast<std::size_t>(b)], mine[static_cast<std::size_t>(b - 1)]);
+      for (int k = 0; k < count; ++k) {
+        const int to = mine[static_cast<std::size_t>(k)].second;
+        neighbours[f][static_cast<std::size_t>(k)] = {to / 2, to % 2 == 1};
+      }
+      neighbour_count[f] = static_cast<unsigned char>(count);
     }
-    i = j;
-  }
-
-  // Components, joined across every shared edge, beside the orientation's search.
-  const auto count_components = [&] {
-    UnionFind components(nf);
-    for (std::size_t i = 1; i < slots.size(); ++i)
-      if (slots[i].key == slots[i - 1].key) components.unite(slots[i - 1].index / 3, slots[i].index / 3);
-    for (int f = 0; f < nf; ++f)
-      if (components.find(f) == f) ++report.components;
-  };
+  }, kPiece);
 
   // Consistent orientation by BFS over manifold edges; per patch, keep the orientation that
   // the larger area had in the file (ties: the patch's first face keeps its orientation).
-  const auto orient = [&] {
-    const VecX area = face_areas(mesh);
-    std::vector<signed char> flip(nf, -1);
-    std::vector<int> queue;
-    for (int seed = 0; seed < nf; ++seed) {
-      if (flip[seed] >= 0) continue;
-      queue.assign(1, seed);
-      flip[seed] = 0;
-      for (std::size_t head = 0; head < queue.size(); ++head) {
-        const int f = queue[head];
-        for (int k = 0; k < neighbour_count[f]; ++k) {
-          const int g = neighbours[f][k].face;
-          const signed char want = static_cast<signed char>(flip[f] ^ (neighbours[f][k].same ? 1 : 0));
-          if (flip[g] < 0) {
-            flip[g] = want;
-            queue.push_back(g);
-          } else if (flip[g] != want) {
-            report.orientable = false;
-          }
+  const VecX area = face_areas(mesh);
+  std::vector<signed char> flip(nf, -1);
+  std::vector<int> patch(nf);
+  std::vector<int> queue;
+  int patches = 0;
+  for (int seed = 0; seed < nf; ++seed) {
+    if (flip[seed] >= 0) continue;
+    queue.assign(1, seed);
+    flip[seed] = 0;
+    for (std::size_t head = 0; head < queue.size(); ++head) {
+      const int f = queue[head];
+      patch[f] = patches;
+      for (int k = 0; k < neighbour_count[f]; ++k) {
+        const int g = neighbours[f][k].face;
+        const signed char want = static_cast<signed char>(flip[f] ^ (neighbours[f][k].same ? 1 : 0));
+        if (flip[g] < 0) {
+          flip[g] = want;
+          queue.push_back(g);
+        } else if (flip[g] != want) {
+          report.orientable = false;
         }
       }
-      double flipped_area = 0.0, kept_area = 0.0;
-      for (int f : queue) (flip[f] ? flipped_area : kept_area) += area(f);
-      if (flipped_area > kept_area)
-        for (int f : queue) flip[f] ^= 1;
     }
-    for (int f = 0; f < nf; ++f)
-      if (flip[f]) {
-        std::swap(mesh.F(f, 1), mesh.F(f, 2));
-        ++report.flipped_faces;
-      }
-  };
-  run_beside(count_components, orient);
+    ++patches;
+    double flipped_area = 0.0, kept_area = 0.0;
+    for (int f : queue) (flip[f] ? flipped_area : kept_area) += area(f);
+    if (flipped_area > kept_area)
+      for (int f : queue) flip[f] ^= 1;
+  }
+  for (int f = 0; f < nf; ++f)
+    if (flip[f]) {
+      std::swap(mesh.F(f, 1), mesh.F(f, 2));
+      ++report.flipped_faces;
+    }
+  // Components join across every shared edge: the patches (joined across manifold edges) are
+  // joined across the non-manifold ones too.
+  UnionFind components(patches);
+  for (const std::size_t first : edges.non_manifold)
+    for (std::size_t i = first + 1; i < slots.size() && slots[i].key == slots[first].key; ++i)
+      components.unite(patch[slots[first].index / 3], patch[slots[i].index / 3]);
+  for (int p = 0; p < patches; ++p)
+    if (components.find(p) == p) ++report.components;
   if (options.flip) mesh.F.col(1).swap(mesh.F.col(2));
   return out;
 }

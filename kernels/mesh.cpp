@@ -38,10 +38,12 @@ Points face_normals(const Mesh& mesh) {
 
 VecX face_areas(const Mesh& mesh) {
   VecX A(mesh.F.rows());
-  for (Eigen::Index f = 0; f < mesh.F.rows(); ++f) {
-    const Vec3 p0 = mesh.V.row(mesh.F(f, 0));
-    A(f) = 0.5 * (Vec3(mesh.V.row(mesh.F(f, 1))) - p0).cross(Vec3(mesh.V.row(mesh.F(f, 2))) - p0).norm();
-  }
+  parallel_for(0, static_cast<std::size_t>(mesh.F.rows()), [&](std::size_t begin, std::size_t end) {
+    for (auto f = static_cast<Eigen::Index>(begin); f < static_cast<Eigen::Index>(end); ++f) {
+      const Vec3 p0 = mesh.V.row(mesh.F(f, 0));
+      A(f) = 0.5 * (Vec3(mesh.V.row(mesh.F(f, 1))) - p0).cross(Vec3(mesh.V.row(mesh.F(f, 2))) - p0).norm();
+    }
+  }, 16384);
   return A;
 }
 
@@ -102,8 +104,11 @@ void radix_sort_by_key(std::span<KeyedIndex> items, int key_bits) {
 // Not a comparison sort: the slots are counted into buckets by their edge's lower vertex in
 // slot order (so each bucket holds its slots in slot order), then each bucket, a vertex's
 // few edges, is sorted by the higher vertex. The order is total, so this is exactly the
-// order std::sort gives, in time linear in the slots.
+// order std::sort gives, in time linear in the slots. The faces are counted and placed in up
+// to eight chunks side by side: a chunk's slots go after those of the chunks before it in
+// each bucket, which keeps slot order.
 void fill_sorted_edge_slots(const Mesh& mesh, std::span<KeyedIndex> edges) {
+  constexpr std::size_t kChunkFaces = 16384;
   const int nf = mesh.face_count();
   const auto nv = static_cast<std::size_t>(mesh.vertex_count());
   assert(edges.size() == static_cast<std::size_t>(nf) * 3);
@@ -112,17 +117,31 @@ void fill_sorted_edge_slots(const Mesh& mesh, std::span<KeyedIndex> edges) {
     const auto v = static_cast<std::uint32_t>(mesh.F(f, (k + 1) % 3));
     return (std::uint64_t{std::min(u, v)} << 32) | std::max(u, v);
   };
-  // bucket_end[u + 1] counts the slots whose lower vertex is u, then (summed) ends u's bucket.
+  const std::size_t chunks = std::clamp<std::size_t>(
+      std::min(static_cast<std::size_t>(nf) / kChunkFaces, static_cast<std::size_t>(max_threads())), 1, 8);
+  const auto first_face = [&](std::size_t c) { return static_cast<int>(static_cast<std::size_t>(nf) * c / chunks); };
+  // next[c][u]: chunk c's slots whose lower vertex is u, then where chunk c puts its next one.
+  std::vector<std::int32_t> next(chunks * nv, 0);
+  parallel_invoke_each(chunks, [&](std::size_t c) {
+    std::int32_t* count = next.data() + c * nv;
+    for (int f = first_face(c), end = first_face(c + 1); f < end; ++f)
+      for (int k = 0; k < 3; ++k) ++count[key_of(f, k) >> 32];
+  });
+  // bucket_end[u + 1]: where u's bucket ends (and u + 1's begins).
   std::vector<std::int32_t> bucket_end(nv + 1, 0);
-  for (int f = 0; f < nf; ++f)
-    for (int k = 0; k < 3; ++k) ++bucket_end[static_cast<std::size_t>(key_of(f, k) >> 32) + 1];
-  std::partial_sum(bucket_end.begin(), bucket_end.end(), bucket_end.begin());
-  std::vector<std::int32_t> next(bucket_end.begin(), bucket_end.end() - 1);
-  for (int f = 0; f < nf; ++f)
-    for (int k = 0; k < 3; ++k) {
-      const std::uint64_t key = key_of(f, k);
-      edges[static_cast<std::size_t>(next[static_cast<std::size_t>(key >> 32)]++)] = {key, 3 * f + k};
-    }
+  std::int32_t running = 0;
+  for (std::size_t u = 0; u < nv; ++u) {
+    for (std::size_t c = 0; c < chunks; ++c) running += std::exchange(next[c * nv + u], running);
+    bucket_end[u + 1] = running;
+  }
+  parallel_invoke_each(chunks, [&](std::size_t c) {
+    std::int32_t* place = next.data() + c * nv;
+    for (int f = first_face(c), end = first_face(c + 1); f < end; ++f)
+      for (int k = 0; k < 3; ++k) {
+        const std::uint64_t key = key_of(f, k);
+        edges[static_cast<std::size_t>(place[key >> 32]++)] = {key, 3 * f + k};
+      }
+  });
   parallel_for(0, nv, [&](std::size_t begin, std::size_t end) {
     for (std::size_t u = begin; u < end; ++u) {
       const auto first = edges.begin() + bucket_end[u], last = edges.begin() + bucket_end[u + 1];
