@@ -171,7 +171,8 @@ std::size_t piece_count(std::size_t n) { return std::clamp<std::size_t>(n / kPie
 // Calls body(piece, begin, end) on each of `pieces` equal pieces of [0, n).
 template <class Body>
 void for_each_piece(std::size_t n, std::size_t pieces, const Body& body) {
-  parallel_invoke_each(pieces, [&](std::size_t c) { body(c, n * c / pieces, n * (c + 1) / pieces); });
+  parallel_invoke_each(pieces,
+                       [&](std::size_t c) { body(c, n * c / pieces, n * (c + 1) / pieces); });
 }
 
 // Finite and in range, or a one-line error naming the point: where(), called only then (every
@@ -290,14 +291,16 @@ RawMesh parse_stl_binary(const std::string& path, std::string_view data) {
         raw.xyz[9 * t + i] = x;
         if (!std::isfinite(x) || std::abs(x) > kMaxCoordinate) valid = false;
       }
-      for (int corner = 0; corner < 3; ++corner) raw.triangles[3 * t + corner] = static_cast<int>(3 * t + corner);
+      for (std::size_t corner = 3 * t; corner < 3 * t + 3; ++corner)
+        raw.triangles[corner] = static_cast<int>(corner);
     }
     if (!valid) invalid.store(true, std::memory_order_relaxed);
   }, kPiece);
   if (invalid.load(std::memory_order_relaxed))
     for (std::uint64_t t = 0; t < expected; ++t)
       for (int corner = 0; corner < 3; ++corner)
-        check_coordinates(path, &raw.xyz[9 * t + 3 * corner], [&] { return "triangle " + std::to_string(t + 1); });
+        check_coordinates(path, &raw.xyz[9 * t + 3 * corner],
+                          [&] { return "triangle " + std::to_string(t + 1); });
   return raw;
 }
 
@@ -587,11 +590,14 @@ void check_ply_counts(const std::string& path, const std::vector<PlyElement>& el
 // else, or anything amiss (fewer bytes than the rows need, a polygon, an index out of range, a
 // point not finite or out of range, a count over flank's limits), gives nothing: the general
 // reader then reads the file and names the problem.
-std::optional<RawMesh> parse_ply_triangles(std::string_view body, const std::vector<PlyElement>& elements,
-                                           const PlyElement* vertex_element, const PlyElement* face_element,
+std::optional<RawMesh> parse_ply_triangles(std::string_view body,
+                                           const std::vector<PlyElement>& elements,
+                                           const PlyElement* vertex_element,
+                                           const PlyElement* face_element,
                                            const int xyz_property[3], int index_property) {
   if (!face_element || face_element->count == 0) return std::nullopt;
-  if (vertex_element->count > kMaxVertices || face_element->count > kMaxTriangles) return std::nullopt;
+  if (vertex_element->count > kMaxVertices || face_element->count > kMaxTriangles)
+    return std::nullopt;
   // Each element's row size and first row; for the vertex element, where x, y and z lie in a
   // row, for the face element where the count and the indices do.
   std::uint64_t offset = 0, vertex_start = 0, vertex_row = 0, face_start = 0, face_row = 0;
@@ -615,24 +621,29 @@ std::optional<RawMesh> parse_ply_triangles(std::string_view body, const std::vec
     }
     if (&element == vertex_element) vertex_start = offset, vertex_row = row;
     if (&element == face_element) face_start = offset, face_row = row;
-    if (row > 0 && static_cast<std::uint64_t>(element.count) > (body.size() - offset) / row) return std::nullopt;
+    if (row > 0 && static_cast<std::uint64_t>(element.count) > (body.size() - offset) / row)
+      return std::nullopt;
     offset += row * static_cast<std::uint64_t>(element.count);
   }
   const PlyProperty& list = face_element->properties[static_cast<std::size_t>(index_property)];
-  const std::uint64_t index_size = ply_type_size(list.type), indices_at = count_at + ply_type_size(list.count_type);
+  const std::uint64_t index_size = ply_type_size(list.type);
+  const std::uint64_t indices_at = count_at + ply_type_size(list.count_type);
   const auto* bytes = reinterpret_cast<const unsigned char*>(body.data());
-  const auto nv = static_cast<std::size_t>(vertex_element->count), nf = static_cast<std::size_t>(face_element->count);
+  const auto nv = static_cast<std::size_t>(vertex_element->count);
+  const auto nf = static_cast<std::size_t>(face_element->count);
   RawMesh raw;
   raw.xyz.resize(3 * nv);
   raw.triangles.resize(3 * nf);
   std::atomic<bool> amiss{false};
   PlyType xyz_type[3];
-  for (int k = 0; k < 3; ++k) xyz_type[k] = vertex_element->properties[static_cast<std::size_t>(xyz_property[k])].type;
+  for (int k = 0; k < 3; ++k)
+    xyz_type[k] = vertex_element->properties[static_cast<std::size_t>(xyz_property[k])].type;
   parallel_for(0, nv, [&](std::size_t begin, std::size_t end) {
     bool fine = true;
     for (std::size_t v = begin; v < end; ++v)
       for (int k = 0; k < 3; ++k) {
-        const double x = load_ply_value(xyz_type[k], bytes + vertex_start + vertex_row * v + xyz_at[k]);
+        const double x =
+            load_ply_value(xyz_type[k], bytes + vertex_start + vertex_row * v + xyz_at[k]);
         raw.xyz[3 * v + static_cast<std::size_t>(k)] = x;
         if (!std::isfinite(x) || std::abs(x) > kMaxCoordinate) fine = false;
       }
@@ -755,8 +766,8 @@ RawMesh parse_ply(const std::string& path, std::string_view data, std::string& f
 
   // Body.
   if (binary)
-    if (std::optional<RawMesh> raw = parse_ply_triangles(data.substr(pos), elements, vertex_element, face_element,
-                                                         xyz_property, index_property))
+    if (std::optional<RawMesh> raw = parse_ply_triangles(
+            data.substr(pos), elements, vertex_element, face_element, xyz_property, index_property))
       return std::move(*raw);
   PlyBody body(data.substr(pos), binary);
   check_ply_counts(path, elements, vertex_element, face_element, index_property, body);
@@ -835,8 +846,11 @@ RawMesh parse_ply(const std::string& path, std::string_view data, std::string& f
 
 // ------------------------------------------------------------------------- validate and repair
 
-// MurmurHash3's 64-bit finalizer: a bijection that spreads every input bit over the output.
-std::uint64_t mix_bits(std::uint64_t h) {
+// Three words' hash: each times an odd constant, summed, then mixed by MurmurHash3's 64-bit
+// finalizer (a bijection that spreads every bit over the result).
+std::uint64_t hash_words(std::uint64_t a, std::uint64_t b, std::uint64_t c) {
+  std::uint64_t h =
+      a * 0x9e3779b97f4a7c15ULL + b * 0xc2b2ae3d27d4eb4fULL + c * 0x165667b19e3779f9ULL;
   h ^= h >> 33;
   h *= 0xff51afd7ed558ccdULL;
   h ^= h >> 33;
@@ -908,24 +922,25 @@ int drop_duplicate_faces(std::vector<int>& triangles) {
       std::array<int, 3>& v = vertices[f];
       std::copy_n(triangles.begin() + static_cast<std::ptrdiff_t>(3 * f), 3, v.begin());
       std::sort(v.begin(), v.end());
-      const std::uint64_t h = (std::uint64_t{static_cast<std::uint32_t>(v[0])} * 0x9e3779b97f4a7c15ULL +
-                               std::uint64_t{static_cast<std::uint32_t>(v[1])} * 0xc2b2ae3d27d4eb4fULL +
-                               std::uint64_t{static_cast<std::uint32_t>(v[2])} * 0x165667b19e3779f9ULL);
-      order[f] = {mix_bits(h) >> 32, static_cast<std::int32_t>(f)};
+      order[f] = {hash_words(static_cast<std::uint32_t>(v[0]), static_cast<std::uint32_t>(v[1]),
+                             static_cast<std::uint32_t>(v[2])) >> 32,
+                  static_cast<std::int32_t>(f)};
     }
   }, kPiece);
   radix_sort_by_key(order, 32);
   std::vector<char> duplicate(nf, 0);
-  const int dropped = sum_over_runs<int>(order.data(), order.size(), [&](KeyedIndex* first, KeyedIndex* last) {
+  const auto run = [&](KeyedIndex* first, KeyedIndex* last) {
     if (last - first == 1) return 0;
     std::sort(first, last, [&](const KeyedIndex& a, const KeyedIndex& b) {
-      return vertices[a.index] != vertices[b.index] ? vertices[a.index] < vertices[b.index] : a.index < b.index;
+      const std::array<int, 3>&x = vertices[a.index], &y = vertices[b.index];
+      return x != y ? x < y : a.index < b.index;
     });
     int copies = 0;
     for (const KeyedIndex* k = first + 1; k < last; ++k)
       if (vertices[k->index] == vertices[(k - 1)->index]) duplicate[k->index] = 1, ++copies;
     return copies;
-  });
+  };
+  const int dropped = sum_over_runs<int>(order.data(), order.size(), run);
   if (dropped == 0) return 0;
   std::size_t out = 0;
   for (std::size_t f = 0; f < nf; ++f)
@@ -962,15 +977,21 @@ LoadedMesh repair(const std::string& path, RawMesh raw, std::string format,
   }, kPiece);
   radix_sort_by_key(order, 32);
   std::vector<int> representative(static_cast<std::size_t>(nv));
-  const auto same_point = [&](int a, int b) { return std::equal(coord(a), coord(a) + 3, coord(b)); };
-  const int unique = sum_over_runs<int>(order.data(), order.size(), [&](KeyedIndex* first, KeyedIndex* last) {
-    if (std::all_of(first + 1, last, [&](const KeyedIndex& k) { return same_point(k.index, first->index); })) {
+  const auto same_point = [&](int a, int b) {
+    return std::equal(coord(a), coord(a) + 3, coord(b));
+  };
+  const auto run = [&](KeyedIndex* first, KeyedIndex* last) {
+    const auto copy = [&](const KeyedIndex& k) { return same_point(k.index, first->index); };
+    if (std::all_of(first + 1, last, copy)) {
       for (const KeyedIndex* k = first; k < last; ++k) representative[k->index] = first->index;
       return 1;
     }
     std::sort(first, last, [&](const KeyedIndex& a, const KeyedIndex& b) {
       const double *p = coord(a.index), *q = coord(b.index);
-      return p[0] != q[0] ? p[0] < q[0] : p[1] != q[1] ? p[1] < q[1] : p[2] != q[2] ? p[2] < q[2] : a.index < b.index;
+      return p[0] != q[0]   ? p[0] < q[0]
+             : p[1] != q[1] ? p[1] < q[1]
+             : p[2] != q[2] ? p[2] < q[2]
+                            : a.index < b.index;
     });
     int points = 0;
     for (const KeyedIndex* k = first; k < last; ++k) {
@@ -979,42 +1000,43 @@ LoadedMesh repair(const std::string& path, RawMesh raw, std::string format,
       representative[k->index] = same ? representative[(k - 1)->index] : k->index;
     }
     return points;
-  });
+  };
+  const int unique = sum_over_runs<int>(order.data(), order.size(), run);
   report.welded_vertices = nv - unique;
 
   // Drop degenerate faces: repeated (welded) index or area ≤ 1e-14 · diagonal². The box is
   // of the points the triangles use; min and max are exact, so pieces' boxes make the same.
+  const auto point = [&](int v) { return Vec3(coord(v)[0], coord(v)[1], coord(v)[2]); };
   const std::size_t corner_pieces = piece_count(raw.triangles.size());
-  std::vector<Vec3> piece_lo(corner_pieces, Vec3::Constant(std::numeric_limits<double>::infinity()));
+  constexpr double kInfinity = std::numeric_limits<double>::infinity();
+  std::vector<Vec3> piece_lo(corner_pieces, Vec3::Constant(kInfinity));
   std::vector<Vec3> piece_hi(corner_pieces, -piece_lo[0]);
-  for_each_piece(raw.triangles.size(), corner_pieces, [&](std::size_t c, std::size_t begin, std::size_t end) {
+  for_each_piece(raw.triangles.size(), corner_pieces, [&](std::size_t c, std::size_t begin,
+                                                          std::size_t end) {
     Vec3 lo = piece_lo[c], hi = piece_hi[c];
-    for (std::size_t i = begin; i < end; ++i) {
-      const Vec3 p(coord(raw.triangles[i])[0], coord(raw.triangles[i])[1], coord(raw.triangles[i])[2]);
-      lo = lo.cwiseMin(p), hi = hi.cwiseMax(p);
-    }
+    for (std::size_t i = begin; i < end; ++i)
+      lo = lo.cwiseMin(point(raw.triangles[i])), hi = hi.cwiseMax(point(raw.triangles[i]));
     piece_lo[c] = lo, piece_hi[c] = hi;
   });
   Vec3 lo = piece_lo[0], hi = piece_hi[0];
-  for (std::size_t c = 1; c < corner_pieces; ++c) lo = lo.cwiseMin(piece_lo[c]), hi = hi.cwiseMax(piece_hi[c]);
+  for (std::size_t c = 1; c < corner_pieces; ++c)
+    lo = lo.cwiseMin(piece_lo[c]), hi = hi.cwiseMax(piece_hi[c]);
   const double area_floor = kDegenerateArea * (hi - lo).squaredNorm();
   const auto welded = [&](int t) {
-    return std::array<int, 3>{representative[raw.triangles[3 * t]], representative[raw.triangles[3 * t + 1]],
-                              representative[raw.triangles[3 * t + 2]]};
+    const int* corner = raw.triangles.data() + 3 * static_cast<std::size_t>(t);
+    return std::array<int, 3>{representative[corner[0]], representative[corner[1]],
+                              representative[corner[2]]};
   };
   Buffer<char> degenerate(static_cast<std::size_t>(nt));
   const std::size_t face_pieces = piece_count(static_cast<std::size_t>(nt));
   std::vector<int> kept_before(face_pieces + 1, 0);  // kept faces before piece c, once summed
-  for_each_piece(static_cast<std::size_t>(nt), face_pieces, [&](std::size_t c, std::size_t begin, std::size_t end) {
+  for_each_piece(static_cast<std::size_t>(nt), face_pieces, [&](std::size_t c, std::size_t begin,
+                                                                std::size_t end) {
     for (std::size_t t = begin; t < end; ++t) {
       const auto [a, b, c3] = welded(static_cast<int>(t));
       bool bad = a == b || b == c3 || a == c3;
-      if (!bad) {
-        const Vec3 pa(coord(a)[0], coord(a)[1], coord(a)[2]);
-        const Vec3 pb(coord(b)[0], coord(b)[1], coord(b)[2]);
-        const Vec3 pc(coord(c3)[0], coord(c3)[1], coord(c3)[2]);
-        bad = 0.5 * (pb - pa).cross(pc - pa).norm() <= area_floor;
-      }
+      if (!bad)
+        bad = 0.5 * (point(b) - point(a)).cross(point(c3) - point(a)).norm() <= area_floor;
       degenerate[t] = bad ? 1 : 0;
       kept_before[c + 1] += bad ? 0 : 1;
     }
@@ -1025,7 +1047,8 @@ LoadedMesh repair(const std::string& path, RawMesh raw, std::string format,
     fail(path, nt == 1 ? std::string("the only triangle is degenerate")
                        : "all " + std::to_string(nt) + " triangles are degenerate");
   std::vector<int> kept(3 * static_cast<std::size_t>(kept_before.back()));
-  for_each_piece(static_cast<std::size_t>(nt), face_pieces, [&](std::size_t c, std::size_t begin, std::size_t end) {
+  for_each_piece(static_cast<std::size_t>(nt), face_pieces, [&](std::size_t c, std::size_t begin,
+                                                                std::size_t end) {
     auto next = kept.begin() + 3 * static_cast<std::ptrdiff_t>(kept_before[c]);
     for (std::size_t t = begin; t < end; ++t)
       if (!degenerate[t]) next = std::ranges::copy(welded(static_cast<int>(t)), next).out;
@@ -1036,13 +1059,14 @@ LoadedMesh repair(const std::string& path, RawMesh raw, std::string format,
   // Remove unused vertices, keeping the file's order.
   std::vector<char> used(static_cast<std::size_t>(nv), 0);
   parallel_for(0, kept.size(), [&](std::size_t begin, std::size_t end) {
-    for (std::size_t i = begin; i < end; ++i) std::atomic_ref<char>(used[kept[i]]).store(1, std::memory_order_relaxed);
+    for (std::size_t i = begin; i < end; ++i)
+      std::atomic_ref<char>(used[kept[i]]).store(1, std::memory_order_relaxed);
   }, 3 * kPiece);
   const std::size_t vertex_pieces = piece_count(static_cast<std::size_t>(nv));
   std::vector<int> used_before(vertex_pieces + 1, 0);
-  for_each_piece(static_cast<std::size_t>(nv), vertex_pieces, [&](std::size_t c, std::size_t begin, std::size_t end) {
-    used_before[c + 1] = static_cast<int>(std::count(used.begin() + static_cast<std::ptrdiff_t>(begin),
-                                                     used.begin() + static_cast<std::ptrdiff_t>(end), 1));
+  for_each_piece(static_cast<std::size_t>(nv), vertex_pieces, [&](std::size_t c, std::size_t begin,
+                                                                  std::size_t end) {
+    used_before[c + 1] = static_cast<int>(std::count(used.data() + begin, used.data() + end, 1));
   });
   std::partial_sum(used_before.begin(), used_before.end(), used_before.begin());
   const int used_count = used_before.back();
@@ -1050,18 +1074,20 @@ LoadedMesh repair(const std::string& path, RawMesh raw, std::string format,
   Mesh& mesh = out.mesh;
   mesh.V.resize(used_count, 3);
   std::vector<int> new_index(static_cast<std::size_t>(nv), -1);
-  for_each_piece(static_cast<std::size_t>(nv), vertex_pieces, [&](std::size_t c, std::size_t begin, std::size_t end) {
+  for_each_piece(static_cast<std::size_t>(nv), vertex_pieces, [&](std::size_t c, std::size_t begin,
+                                                                  std::size_t end) {
     int next = used_before[c];
     for (std::size_t v = begin; v < end; ++v)
       if (used[v]) {
         new_index[v] = next;
-        mesh.V.row(next++) << coord(static_cast<int>(v))[0], coord(static_cast<int>(v))[1], coord(static_cast<int>(v))[2];
+        mesh.V.row(next++) = point(static_cast<int>(v)).transpose();
       }
   });
   mesh.F.resize(nf, 3);
   parallel_for(0, static_cast<std::size_t>(nf), [&](std::size_t begin, std::size_t end) {
-    for (std::size_t f = begin; f < end; ++f)
-      for (int k = 0; k < 3; ++k) mesh.F(static_cast<Eigen::Index>(f), k) = new_index[kept[3 * f + k]];
+    for (auto f = static_cast<Eigen::Index>(begin); f < static_cast<Eigen::Index>(end); ++f)
+      for (int k = 0; k < 3; ++k)
+        mesh.F(f, k) = new_index[kept[static_cast<std::size_t>(3 * f + k)]];
   }, kPiece);
 
   // Edges: the 3F edge slots sorted by undirected key, then by face; a run of equal keys is
@@ -1071,7 +1097,8 @@ LoadedMesh repair(const std::string& path, RawMesh raw, std::string format,
   // neighbours in the order of their edges' keys: the order the search below visits them in.
   const Buffer<KeyedIndex> slots = sorted_edge_slots(mesh);
   const auto edge_key = [&](int f, int k) {
-    const auto u = static_cast<std::uint32_t>(mesh.F(f, k)), v = static_cast<std::uint32_t>(mesh.F(f, (k + 1) % 3));
+    const auto u = static_cast<std::uint32_t>(mesh.F(f, k));
+    const auto v = static_cast<std::uint32_t>(mesh.F(f, (k + 1) % 3));
     return (std::uint64_t{std::min(u, v)} << 32) | std::max(u, v);
   };
   const auto forward = [&](int slot) {  // the slot's edge runs from the smaller to the larger index
@@ -1081,12 +1108,14 @@ LoadedMesh repair(const std::string& path, RawMesh raw, std::string format,
   // Per slot, the face across its edge times two, plus one where `same`; -1 where the edge is
   // not manifold.
   Buffer<int> link(slots.size());
-  parallel_for(0, slots.size(), [&](std::size_t begin, std::size_t end) { std::fill(link.begin() + begin, link.begin() + end, -1); }, 3 * kPiece);
-  const EdgeRuns edges = sum_over_runs<EdgeRuns>(slots.data(), slots.size(), [&](const KeyedIndex* first,
-                                                                                   const KeyedIndex* last) {
+  parallel_for(0, slots.size(), [&](std::size_t begin, std::size_t end) {
+    std::fill(link.data() + begin, link.data() + end, -1);
+  }, 3 * kPiece);
+  const auto edge_run = [&](const KeyedIndex* first, const KeyedIndex* last) {
     EdgeRuns runs;
     if (last - first == 1) runs.boundary = 1;
-    if (last - first > 2) runs.non_manifold.push_back(static_cast<std::size_t>(first - slots.data()));
+    if (last - first > 2)
+      runs.non_manifold.push_back(static_cast<std::size_t>(first - slots.data()));
     if (last - first == 2) {
       const int a = first->index, b = (first + 1)->index;
       const int same = forward(a) == forward(b) ? 1 : 0;
@@ -1094,7 +1123,8 @@ LoadedMesh repair(const std::string& path, RawMesh raw, std::string format,
       link[static_cast<std::size_t>(b)] = 2 * (a / 3) + same;
     }
     return runs;
-  });
+  };
+  const EdgeRuns edges = sum_over_runs<EdgeRuns>(slots.data(), slots.size(), edge_run);
   report.boundary_edges = edges.boundary;
   report.non_manifold_edges = static_cast<int>(edges.non_manifold.size());
   struct Neighbour {
@@ -1111,8 +1141,8 @@ LoadedMesh repair(const std::string& path, RawMesh raw, std::string format,
         if (const int to = link[3 * f + static_cast<std::size_t>(k)]; to >= 0)
           mine[static_cast<std::size_t>(count++)] = {edge_key(static_cast<int>(f), k), to};
       for (int a = 1; a < count; ++a)  // by key: at most three
-        for (int b = a; b > 0 && mine[static_cast<std::size_t>(b)].first < mine[static_cast<std::size_t>(b - 1)].first; --b)
-          std::swap(mine[static_cast<std::size_t>(b)], mine[static_cast<std::size_t>(b - 1)]);
+        for (auto b = static_cast<std::size_t>(a); b > 0 && mine[b].first < mine[b - 1].first; --b)
+          std::swap(mine[b], mine[b - 1]);
       for (int k = 0; k < count; ++k) {
         const int to = mine[static_cast<std::size_t>(k)].second;
         neighbours[f][static_cast<std::size_t>(k)] = {to / 2, to % 2 == 1};
@@ -1179,12 +1209,10 @@ bool has_obj_vertex_line(std::string_view data) {
 
 }  // namespace
 
-// The coordinates' bits, each times an odd constant, summed and mixed; the high half.
+// The coordinates' bits hashed; the high half.
 std::uint32_t weld_hash(const double point[3]) {
-  const std::uint64_t h = std::bit_cast<std::uint64_t>(point[0]) * 0x9e3779b97f4a7c15ULL +
-                          std::bit_cast<std::uint64_t>(point[1]) * 0xc2b2ae3d27d4eb4fULL +
-                          std::bit_cast<std::uint64_t>(point[2]) * 0x165667b19e3779f9ULL;
-  return static_cast<std::uint32_t>(mix_bits(h) >> 32);
+  const auto bits = [&](int k) { return std::bit_cast<std::uint64_t>(point[k]); };
+  return static_cast<std::uint32_t>(hash_words(bits(0), bits(1), bits(2)) >> 32);
 }
 
 LoadedMesh repair_triangles(const std::string& name, std::vector<double> xyz,

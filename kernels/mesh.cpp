@@ -41,7 +41,8 @@ VecX face_areas(const Mesh& mesh) {
   parallel_for(0, static_cast<std::size_t>(mesh.F.rows()), [&](std::size_t begin, std::size_t end) {
     for (auto f = static_cast<Eigen::Index>(begin); f < static_cast<Eigen::Index>(end); ++f) {
       const Vec3 p0 = mesh.V.row(mesh.F(f, 0));
-      A(f) = 0.5 * (Vec3(mesh.V.row(mesh.F(f, 1))) - p0).cross(Vec3(mesh.V.row(mesh.F(f, 2))) - p0).norm();
+      const Vec3 p1 = mesh.V.row(mesh.F(f, 1)), p2 = mesh.V.row(mesh.F(f, 2));
+      A(f) = 0.5 * (p1 - p0).cross(p2 - p0).norm();
     }
   }, 16384);
   return A;
@@ -63,8 +64,8 @@ void radix_sort_by_key(std::span<KeyedIndex> items, int key_bits) {
   constexpr std::size_t kChunk = 16384;  // below two of these, one chunk: a fork costs more
   const std::size_t n = items.size();
   if (n < 2) return;
-  const std::size_t chunks =
-      std::clamp<std::size_t>(std::min<std::size_t>(n / kChunk, static_cast<std::size_t>(max_threads())), 1, 8);
+  const auto threads = static_cast<std::size_t>(max_threads());
+  const std::size_t chunks = std::clamp<std::size_t>(std::min(n / kChunk, threads), 1, 8);
   const auto bound = [&](std::size_t c) { return n * c / chunks; };
   Buffer<KeyedIndex> spare(n);
   std::span<KeyedIndex> from = items, to{spare.data(), n};
@@ -82,7 +83,8 @@ void radix_sort_by_key(std::span<KeyedIndex> items, int key_bits) {
     bool one_digit = false;
     for (std::size_t d = 0; d < kBuckets; ++d) {
       const std::size_t first = running;
-      for (std::size_t c = 0; c < chunks; ++c) running += std::exchange(count[c * kBuckets + d], running);
+      for (std::size_t c = 0; c < chunks; ++c)
+        running += std::exchange(count[c * kBuckets + d], running);
       one_digit = one_digit || running - first == n;
     }
     if (one_digit) continue;
@@ -96,8 +98,7 @@ void radix_sort_by_key(std::span<KeyedIndex> items, int key_bits) {
   }
   if (from.data() != items.data())
     parallel_for(0, n, [&](std::size_t begin, std::size_t end) {
-      std::copy(from.begin() + static_cast<std::ptrdiff_t>(begin), from.begin() + static_cast<std::ptrdiff_t>(end),
-                items.begin() + static_cast<std::ptrdiff_t>(begin));
+      std::copy(from.data() + begin, from.data() + end, items.data() + begin);
     }, kChunk);
 }
 
@@ -117,9 +118,10 @@ void fill_sorted_edge_slots(const Mesh& mesh, std::span<KeyedIndex> edges) {
     const auto v = static_cast<std::uint32_t>(mesh.F(f, (k + 1) % 3));
     return (std::uint64_t{std::min(u, v)} << 32) | std::max(u, v);
   };
-  const std::size_t chunks = std::clamp<std::size_t>(
-      std::min(static_cast<std::size_t>(nf) / kChunkFaces, static_cast<std::size_t>(max_threads())), 1, 8);
-  const auto first_face = [&](std::size_t c) { return static_cast<int>(static_cast<std::size_t>(nf) * c / chunks); };
+  const auto faces = static_cast<std::size_t>(nf);
+  const auto threads = static_cast<std::size_t>(max_threads());
+  const std::size_t chunks = std::clamp<std::size_t>(std::min(faces / kChunkFaces, threads), 1, 8);
+  const auto first_face = [&](std::size_t c) { return static_cast<int>(faces * c / chunks); };
   // next[c][u]: chunk c's slots whose lower vertex is u, then where chunk c puts its next one.
   std::vector<std::int32_t> next(chunks * nv, 0);
   parallel_invoke_each(chunks, [&](std::size_t c) {

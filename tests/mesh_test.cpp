@@ -112,24 +112,24 @@ TEST(SortedEdgeSlots, EqualStdSortOfTheKeyedSlots) {
 TEST(RadixSortByKey, IsTheStableSortByKey) {
   std::mt19937_64 rng(11);
   for (const int bits : {1, 11, 12, 32, 33, 64})
-    for (const std::size_t n : {std::size_t{0}, std::size_t{1}, std::size_t{100}, std::size_t{16384},
-                                std::size_t{2 * 16384 + 5}, std::size_t{100000}})
+    for (const std::size_t n : std::vector<std::size_t>{0, 1, 100, 16384, 2 * 16384 + 5, 100000})
       for (const bool shuffled : {false, true}) {
         std::vector<KeyedIndex> items(n);
         for (std::size_t i = 0; i < n; ++i) {
           std::uint64_t key = bits == 64 ? rng() : rng() & ((std::uint64_t{1} << bits) - 1);
-          if (bits == 33) key &= ~(std::uint64_t{0x7ff} << 11);  // the second digit: zero throughout
+          if (bits == 33) key &= ~(std::uint64_t{0x7ff} << 11);  // the second digit: all zero
           items[i] = {key, static_cast<std::int32_t>(i)};
         }
         if (shuffled) std::shuffle(items.begin(), items.end(), rng);
         std::vector<KeyedIndex> want = items;
-        std::stable_sort(want.begin(), want.end(), [](const KeyedIndex& a, const KeyedIndex& b) { return a.key < b.key; });
+        std::stable_sort(want.begin(), want.end(),
+                         [](const KeyedIndex& a, const KeyedIndex& b) { return a.key < b.key; });
         for (const int threads : {1, 2, 3}) {
           const ThreadLimit limit(threads);
           std::vector<KeyedIndex> got = items;
           radix_sort_by_key(got, bits);
-          EXPECT_TRUE(got == want) << bits << " bits, " << n << " items, shuffled " << shuffled << ", "
-                                   << threads << " threads";
+          EXPECT_TRUE(got == want) << bits << " bits, " << n << " items, shuffled " << shuffled
+                                   << ", " << threads << " threads";
         }
       }
 }

@@ -394,13 +394,15 @@ TEST_F(ReadMesh, WeldKeepsFirstOccurrencesWhereHashesCollide) {
     EXPECT_EQ(m.report.welded_vertices, static_cast<int>(corners.size() - want.size()));
     ASSERT_EQ(m.mesh.vertex_count(), static_cast<int>(want.size()));
     for (int v = 0; v < m.mesh.vertex_count(); ++v)
-      for (int k = 0; k < 3; ++k) EXPECT_EQ(m.mesh.V(v, k), want[static_cast<std::size_t>(v)][k]) << v;
+      for (std::size_t k = 0; k < 3; ++k)
+        EXPECT_EQ(m.mesh.V(v, static_cast<int>(k)), want[static_cast<std::size_t>(v)][k]) << v;
     ASSERT_EQ(m.mesh.face_count(), static_cast<int>(corners.size() / 3));
     for (int f = 0; f < m.mesh.face_count(); ++f) {  // the same corners, perhaps reoriented
       std::array<int, 3> got{}, expected{};
       for (int k = 0; k < 3; ++k) {
-        got[static_cast<std::size_t>(k)] = m.mesh.F(f, k);
-        expected[static_cast<std::size_t>(k)] = first.at(corners[static_cast<std::size_t>(3 * f + k)]);
+        const auto at = static_cast<std::size_t>(k);
+        got[at] = m.mesh.F(f, k);
+        expected[at] = first.at(corners[3 * static_cast<std::size_t>(f) + at]);
       }
       std::sort(got.begin(), got.end());
       std::sort(expected.begin(), expected.end());
@@ -422,11 +424,12 @@ PlyTwin ply_twin(int n, bool doubles, const char* count_type, const char* index_
                  const std::function<void(int vertex, double& x)>& edit_x = {}) {
   const std::string coordinate = doubles ? "double" : "float";
   const auto header = [&](const char* format) {
-    return "ply\nformat " + std::string(format) + " 1.0\nelement vertex " + std::to_string((n + 1) * (n + 1)) +
-           "\nproperty " + coordinate + " x\nproperty uchar red\nproperty " + coordinate + " y\nproperty float nx\n" +
-           "property " + coordinate + " z\nelement material 2\nproperty int id\nelement face " +
-           std::to_string(2 * n * n) + "\nproperty uchar flags\nproperty list " + count_type + " " + index_type +
-           " vertex_indices\nproperty float quality\nend_header\n";
+    return "ply\nformat " + std::string(format) + " 1.0\nelement vertex " +
+           std::to_string((n + 1) * (n + 1)) + "\nproperty " + coordinate +
+           " x\nproperty uchar red\nproperty " + coordinate + " y\nproperty float nx\nproperty " +
+           coordinate + " z\nelement material 2\nproperty int id\nelement face " +
+           std::to_string(2 * n * n) + "\nproperty uchar flags\nproperty list " + count_type + " " +
+           index_type + " vertex_indices\nproperty float quality\nend_header\n";
   };
   PlyTwin twin{header("ascii"), header("binary_little_endian")};
   const auto text = [](double x) {
@@ -436,12 +439,13 @@ PlyTwin ply_twin(int n, bool doubles, const char* count_type, const char* index_
   const auto put_integer = [](std::string& s, const char* type, long long v) {
     const std::string t = type;
     const int bytes = t == "uchar" ? 1 : t == "ushort" ? 2 : 4;
-    for (int k = 0; k < bytes; ++k) s.push_back(static_cast<char>((static_cast<unsigned long long>(v) >> (8 * k)) & 0xff));
+    const auto bits = static_cast<unsigned long long>(v);
+    for (int k = 0; k < bytes; ++k) s.push_back(static_cast<char>((bits >> (8 * k)) & 0xff));
   };
   std::mt19937 rng(7);
   for (int v = 0; v < (n + 1) * (n + 1); ++v) {
-    double p[3] = {v % (n + 1) + 0.25 * static_cast<float>(rng() % 1000) / 1000.0, static_cast<double>(v / (n + 1)),
-                   static_cast<float>(std::sin(0.1 * v))};
+    double p[3] = {v % (n + 1) + 0.25 * static_cast<float>(rng() % 1000) / 1000.0,
+                   static_cast<double>(v / (n + 1)), static_cast<float>(std::sin(0.1 * v))};
     if (!doubles)
       for (double& x : p) x = static_cast<float>(x);
     if (edit_x) edit_x(v, p[0]);
@@ -458,7 +462,8 @@ PlyTwin ply_twin(int n, bool doubles, const char* count_type, const char* index_
     put_integer(twin.binary, "int", id);
   }
   for (int f = 0; f < 2 * n * n; ++f) {
-    const int i = f / 2 % n, j = f / 2 / n, a = j * (n + 1) + i, b = a + 1, c = a + n + 2, d = a + n + 1;
+    const int i = f / 2 % n, j = f / 2 / n;
+    const int a = j * (n + 1) + i, b = a + 1, c = a + n + 2, d = a + n + 1;
     std::vector<int> corners = f % 2 ? std::vector<int>{a, c, d} : std::vector<int>{a, b, c};
     if (edit_face) edit_face(f, corners);
     twin.ascii += "1 " + std::to_string(corners.size());
@@ -482,12 +487,14 @@ TEST_F(ReadMesh, BinaryTrianglePlyReadsAsItsAsciiTwin) {
               std::tie(y.report.input_vertices, y.report.input_faces, y.report.welded_vertices));
   };
   for (const bool doubles : {false, true})
-    for (const auto& [count_type, index_type] : {std::pair{"uchar", "int"}, std::pair{"int", "uint"}, std::pair{"uchar", "ushort"}})
+    for (const auto& [count_type, index_type] :
+         {std::pair{"uchar", "int"}, std::pair{"int", "uint"}, std::pair{"uchar", "ushort"}})
       for (const int threads : {1, 2}) {
-        SCOPED_TRACE(std::string(doubles ? "double" : "float") + " " + count_type + " " + index_type + " at " +
-                     std::to_string(threads) + " threads");
+        SCOPED_TRACE(std::string(doubles ? "double" : "float") + " " + count_type + " " +
+                     index_type + " at " + std::to_string(threads) + " threads");
         const ThreadLimit limit(threads);
-        const PlyTwin twin = ply_twin(120, doubles, count_type, index_type);  // 14.6k points, 28.8k faces
+        // 14.6k points and 28.8k faces: several pieces of rows.
+        const PlyTwin twin = ply_twin(120, doubles, count_type, index_type);
         const LoadedMesh binary = read_mesh_bytes("twin.ply", twin.binary);
         EXPECT_EQ(binary.report.format, "ply-binary");
         EXPECT_EQ(binary.mesh.face_count(), 2 * 120 * 120);
