@@ -5,8 +5,8 @@
 #include <cstdint>
 #include <numeric>
 #include <span>
-#include <utility>
 #include <unordered_map>
+#include <utility>
 #include <vector>
 
 #include "kernels/parallel.h"

@@ -48,8 +48,8 @@ struct KeyedIndex {
 // Sorts by key, keeping the order of equal keys: items that arrive in index order leave in
 // KeyedIndex's order. Keys must be below 2^key_bits. Radix passes of 11 bits from the lowest
 // (a pass skipped where every key has the same digit), each on up to eight chunks side by side:
-// linear in the items, and as fast on random keys (hashes) as on ordered ones, where a
-// comparison sort mispredicts nearly every other branch. A stable sort's result is unique, so
+// linear in the items, and as fast on random keys (hashes) as on ordered ones; a comparison
+// sort mispredicts most of its branches on random keys. A stable sort's result is unique, so
 // it is the same whatever the thread count.
 void radix_sort_by_key(std::span<KeyedIndex> items, int key_bits);
 // Every edge slot, 3 f + k for edge (k, k + 1 mod 3) of face f, keyed by its vertex pair (the
