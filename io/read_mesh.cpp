@@ -889,9 +889,11 @@ Sum sum_over_runs(Item* sorted, std::size_t n, const Run& run) {
 struct EdgeRuns {
   int boundary = 0;
   std::vector<std::size_t> non_manifold;
+  bool same = false;  // some manifold edge is run the same way by its two faces
   EdgeRuns& operator+=(const EdgeRuns& o) {
     boundary += o.boundary;
     non_manifold.insert(non_manifold.end(), o.non_manifold.begin(), o.non_manifold.end());
+    same = same || o.same;
     return *this;
   }
 };
@@ -1121,12 +1123,50 @@ LoadedMesh repair(const std::string& path, RawMesh raw, std::string format,
       const int same = forward(a) == forward(b) ? 1 : 0;
       link[static_cast<std::size_t>(a)] = 2 * (b / 3) + same;
       link[static_cast<std::size_t>(b)] = 2 * (a / 3) + same;
+      runs.same = same == 1;
     }
     return runs;
   };
   const EdgeRuns edges = sum_over_runs<EdgeRuns>(slots.data(), slots.size(), edge_run);
   report.boundary_edges = edges.boundary;
   report.non_manifold_edges = static_cast<int>(edges.non_manifold.size());
+  // Faces that run every manifold edge they share in opposite directions (most parts as read)
+  // are oriented consistently already: the search below would flip none of them. Their
+  // components then come from a union-find in pieces of faces, side by side (links within a
+  // piece), then over the links between pieces and the non-manifold edges.
+  if (!edges.same) {
+    UnionFind components(nf);
+    const std::size_t pieces = piece_count(static_cast<std::size_t>(nf));
+    std::vector<std::vector<std::pair<int, int>>> across(pieces);  // face pairs, per piece
+    std::vector<int> roots(pieces, 0);
+    for_each_piece(static_cast<std::size_t>(nf), pieces, [&](std::size_t c, std::size_t begin,
+                                                             std::size_t end) {
+      for (std::size_t f = begin; f < end; ++f)
+        for (std::size_t k = 0; k < 3; ++k) {
+          const int to = link[3 * f + k];
+          const auto g = static_cast<std::size_t>(to / 2);
+          if (to < 0 || g < f) continue;  // each pair once, from its lower face
+          if (g < end)
+            components.unite(static_cast<int>(f), static_cast<int>(g));  // roots stay in the piece
+          else
+            across[c].emplace_back(static_cast<int>(f), static_cast<int>(g));
+        }
+    });
+    for (const auto& pairs : across)
+      for (const auto& [f, g] : pairs) components.unite(f, g);
+    for (const std::size_t first : edges.non_manifold)
+      for (std::size_t i = first + 1; i < slots.size() && slots[i].key == slots[first].key; ++i)
+        components.unite(slots[first].index / 3, slots[i].index / 3);
+    for_each_piece(static_cast<std::size_t>(nf), pieces, [&](std::size_t c, std::size_t begin,
+                                                             std::size_t end) {
+      for (std::size_t f = begin; f < end; ++f)
+        roots[c] += components.parent[f] == static_cast<int>(f) ? 1 : 0;
+    });
+    report.components = std::accumulate(roots.begin(), roots.end(), 0);
+    if (options.flip) mesh.F.col(1).swap(mesh.F.col(2));
+    return out;
+  }
+
   struct Neighbour {
     int face = -1;
     bool same = false;

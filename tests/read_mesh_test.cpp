@@ -537,6 +537,83 @@ TEST_F(ReadMesh, BinaryTrianglePlyReadsAsItsAsciiTwin) {
             "bad.ply: coordinate out of range (|x| > 1e40) at vertex 5");
 }
 
+// A part oriented consistently as read has its components counted in pieces of faces. A
+// 200 × 100 grid of squares, shuffled, cut by removed columns into bands, an island cut out
+// by a removed ring, and fins on interior edges (each a non-manifold edge: a fin is its
+// band's); the count is a breadth-first search's over shared edges, at one thread and two,
+// and the same with one face reversed (the orientation's own search counts it then).
+TEST_F(ReadMesh, ComponentsAreCountedInPiecesWhenOrientedAsRead) {
+  constexpr int nx = 200, ny = 100;
+  const auto id = [](int i, int j) { return j * (nx + 1) + i; };
+  const auto removed = [](int i, int j) {
+    const bool cut_column = i % 50 == 25;
+    const bool in_ring = i >= 60 && i <= 70 && j >= 40 && j <= 50;
+    const bool ring = in_ring && (i == 60 || i == 70 || j == 40 || j == 50);
+    return cut_column || ring;
+  };
+  std::vector<std::array<int, 3>> faces;
+  for (int j = 0; j < ny; ++j)
+    for (int i = 0; i < nx; ++i)
+      if (!removed(i, j)) {
+        faces.push_back({id(i, j), id(i + 1, j), id(i + 1, j + 1)});
+        faces.push_back({id(i, j), id(i + 1, j + 1), id(i, j + 1)});
+      }
+  std::vector<double> xyz;
+  for (int v = 0; v < (nx + 1) * (ny + 1); ++v)
+    xyz.insert(xyz.end(),
+               {static_cast<double>(v % (nx + 1)), static_cast<double>(v / (nx + 1)), 0.0});
+  for (int k = 0; k < 20; ++k) {  // a fin up from an interior edge, on a vertex of its own
+    const int i = 3 + 10 * k, j = 7 + 4 * k, fresh = static_cast<int>(xyz.size() / 3);
+    xyz.insert(xyz.end(), {i + 0.5, j + 0.5, 1.0});
+    faces.push_back({id(i, j), id(i + 1, j + 1), fresh});
+  }
+  std::mt19937 rng(9);
+  std::shuffle(faces.begin(), faces.end(), rng);
+  // The reference: faces joined across shared undirected edges, searched breadth first.
+  std::map<std::pair<int, int>, std::vector<int>> by_edge;
+  for (int f = 0; f < static_cast<int>(faces.size()); ++f)
+    for (int k = 0; k < 3; ++k) {
+      const int a = faces[static_cast<std::size_t>(f)][static_cast<std::size_t>(k)];
+      const int b = faces[static_cast<std::size_t>(f)][static_cast<std::size_t>((k + 1) % 3)];
+      by_edge[{std::min(a, b), std::max(a, b)}].push_back(f);
+    }
+  std::vector<std::vector<int>> next(faces.size());
+  for (const auto& [edge, on] : by_edge)
+    for (const int f : on)
+      for (const int g : on)
+        if (f != g) next[static_cast<std::size_t>(f)].push_back(g);
+  std::vector<char> seen(faces.size(), 0);
+  int want = 0;
+  for (std::size_t seed = 0; seed < faces.size(); ++seed) {
+    if (seen[seed]) continue;
+    ++want;
+    std::vector<int> queue = {static_cast<int>(seed)};
+    seen[seed] = 1;
+    while (!queue.empty()) {
+      const int f = queue.back();
+      queue.pop_back();
+      for (const int g : next[static_cast<std::size_t>(f)])
+        if (char& mark = seen[static_cast<std::size_t>(g)]; !mark) mark = 1, queue.push_back(g);
+    }
+  }
+  EXPECT_EQ(want, 5 + 1);  // five bands and the island
+  for (const bool reversed_one : {false, true}) {
+    std::vector<int> triangles;
+    for (const auto& t : faces) triangles.insert(triangles.end(), t.begin(), t.end());
+    if (reversed_one) std::swap(triangles[4], triangles[5]);
+    for (const int threads : {1, 2}) {
+      SCOPED_TRACE(std::string(reversed_one ? "one face reversed" : "as read") + " at " +
+                   std::to_string(threads) + " threads");
+      const ThreadLimit limit(threads);
+      const LoadedMesh m = repair_triangles("grid", xyz, triangles, "soup", {});
+      EXPECT_EQ(m.report.components, want);
+      EXPECT_EQ(m.report.non_manifold_edges, 20);
+      EXPECT_EQ(m.report.flipped_faces, reversed_one ? 1 : 0);
+      EXPECT_TRUE(m.report.orientable);
+    }
+  }
+}
+
 TEST_F(ReadMesh, FlipReversesEverythingAfterRepair) {
   ReadOptions options;
   options.flip = true;
