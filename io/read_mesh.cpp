@@ -1098,11 +1098,6 @@ LoadedMesh repair(const std::string& path, RawMesh raw, std::string format,
   // run the edge in the same direction, i.e. one of them must be flipped. A face lists its
   // neighbours in the order of their edges' keys: the order the search below visits them in.
   const Buffer<KeyedIndex> slots = sorted_edge_slots(mesh);
-  const auto edge_key = [&](int f, int k) {
-    const auto u = static_cast<std::uint32_t>(mesh.F(f, k));
-    const auto v = static_cast<std::uint32_t>(mesh.F(f, (k + 1) % 3));
-    return (std::uint64_t{std::min(u, v)} << 32) | std::max(u, v);
-  };
   const auto forward = [&](int slot) {  // the slot's edge runs from the smaller to the larger index
     const int f = slot / 3, k = slot % 3;
     return mesh.F(f, k) < mesh.F(f, (k + 1) % 3);
@@ -1179,7 +1174,7 @@ LoadedMesh repair(const std::string& path, RawMesh raw, std::string format,
       int count = 0;
       for (int k = 0; k < 3; ++k)
         if (const int to = link[3 * f + static_cast<std::size_t>(k)]; to >= 0)
-          mine[static_cast<std::size_t>(count++)] = {edge_key(static_cast<int>(f), k), to};
+          mine[static_cast<std::size_t>(count++)] = {edge_key(mesh, static_cast<int>(f), k), to};
       for (int a = 1; a < count; ++a)  // by key: at most three
         for (auto b = static_cast<std::size_t>(a); b > 0 && mine[b].first < mine[b - 1].first; --b)
           std::swap(mine[b], mine[b - 1]);

@@ -113,11 +113,6 @@ void fill_sorted_edge_slots(const Mesh& mesh, std::span<KeyedIndex> edges) {
   const int nf = mesh.face_count();
   const auto nv = static_cast<std::size_t>(mesh.vertex_count());
   assert(edges.size() == static_cast<std::size_t>(nf) * 3);
-  const auto key_of = [&](int f, int k) {
-    const auto u = static_cast<std::uint32_t>(mesh.F(f, k));
-    const auto v = static_cast<std::uint32_t>(mesh.F(f, (k + 1) % 3));
-    return (std::uint64_t{std::min(u, v)} << 32) | std::max(u, v);
-  };
   const auto faces = static_cast<std::size_t>(nf);
   const auto threads = static_cast<std::size_t>(max_threads());
   const std::size_t chunks = std::clamp<std::size_t>(std::min(faces / kChunkFaces, threads), 1, 8);
@@ -127,7 +122,7 @@ void fill_sorted_edge_slots(const Mesh& mesh, std::span<KeyedIndex> edges) {
   parallel_invoke_each(chunks, [&](std::size_t c) {
     std::int32_t* count = next.data() + c * nv;
     for (int f = first_face(c), end = first_face(c + 1); f < end; ++f)
-      for (int k = 0; k < 3; ++k) ++count[key_of(f, k) >> 32];
+      for (int k = 0; k < 3; ++k) ++count[edge_key(mesh, f, k) >> 32];
   });
   // bucket_end[u + 1]: where u's bucket ends (and u + 1's begins).
   std::vector<std::int32_t> bucket_end(nv + 1, 0);
@@ -140,7 +135,7 @@ void fill_sorted_edge_slots(const Mesh& mesh, std::span<KeyedIndex> edges) {
     std::int32_t* place = next.data() + c * nv;
     for (int f = first_face(c), end = first_face(c + 1); f < end; ++f)
       for (int k = 0; k < 3; ++k) {
-        const std::uint64_t key = key_of(f, k);
+        const std::uint64_t key = edge_key(mesh, f, k);
         edges[static_cast<std::size_t>(place[key >> 32]++)] = {key, 3 * f + k};
       }
   });

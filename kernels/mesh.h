@@ -52,6 +52,12 @@ struct KeyedIndex {
 // sort mispredicts most of its branches on random keys. A stable sort's result is unique, so
 // it is the same whatever the thread count.
 void radix_sort_by_key(std::span<KeyedIndex> items, int key_bits);
+// The key of edge (k, k + 1 mod 3) of face f: its vertex pair, the lower in the high 32 bits.
+inline std::uint64_t edge_key(const Mesh& mesh, int f, int k) {
+  const auto u = static_cast<std::uint32_t>(mesh.F(f, k));
+  const auto v = static_cast<std::uint32_t>(mesh.F(f, (k + 1) % 3));
+  return (std::uint64_t{u < v ? u : v} << 32) | (u < v ? v : u);
+}
 // Every edge slot, 3 f + k for edge (k, k + 1 mod 3) of face f, keyed by its vertex pair (the
 // lower vertex in the high 32 bits), sorted by (key, slot): the slots of one edge are
 // adjacent. The order std::sort gives, in time linear in the slots. Into `edges` (3 × #F).

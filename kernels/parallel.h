@@ -4,7 +4,6 @@
 // serial combine so that they never depend on the thread count.
 #pragma once
 
-#include <algorithm>
 #include <cstddef>
 #include <cstdint>
 #include <functional>
@@ -129,35 +128,6 @@ class ThreadLimit {
 
 // Threads available to parallel_for right now.
 int max_threads();
-
-// Sorts [first, last) by `less`, which must be a strict total order (no two elements
-// equivalent: break ties by index), so that there is one sorted sequence, the same whatever the
-// thread count. Pieces of at least kSortPiece elements, one per thread (a power of two, at most
-// 8), are sorted side by side and then merged in pairs, the pairs of a round side by side.
-// Pieces are merge-sorted (std::stable_sort): fewer comparisons than std::sort's, which counts
-// where `less` looks through indices (HECC a's STL read and repaired at one thread: 8.9 ms with
-// std::sort's pieces, 3.7 ms with these).
-inline constexpr std::ptrdiff_t kSortPiece = 16384;
-template <class It, class Less>
-void parallel_sort(It first, It last, Less less) {
-  const std::ptrdiff_t n = last - first;
-  std::ptrdiff_t pieces = 1;
-  while (pieces < 8 && 2 * pieces <= max_threads() && n >= 2 * pieces * kSortPiece) pieces *= 2;
-  if (pieces == 1) {
-    std::stable_sort(first, last, less);
-    return;
-  }
-  const auto bound = [&](std::ptrdiff_t k) { return first + n * k / pieces; };
-  parallel_invoke_each(static_cast<std::size_t>(pieces), [&](std::size_t k) {
-    const auto i = static_cast<std::ptrdiff_t>(k);
-    std::stable_sort(bound(i), bound(i + 1), less);
-  });
-  for (std::ptrdiff_t width = 1; width < pieces; width *= 2)
-    parallel_invoke_each(static_cast<std::size_t>(pieces / (2 * width)), [&](std::size_t k) {
-      const auto i = static_cast<std::ptrdiff_t>(k) * 2 * width;
-      std::inplace_merge(bound(i), bound(i + width), bound(i + 2 * width), less);
-    });
-}
 
 // In the ThreadSanitizer build (FLANK_TSAN_THREADS) only: third-party code that threads
 // through oneTBB, Embree's BVH build, runs on the calling thread from now on, because TSan

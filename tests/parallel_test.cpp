@@ -6,8 +6,6 @@
 #include <atomic>
 #include <chrono>
 #include <mutex>
-#include <random>
-#include <numeric>
 #include <stdexcept>
 #include <thread>
 #include <utility>
@@ -245,31 +243,6 @@ TEST(Parallel, CrewRunsEveryChunkOnceAndTheOtherThreadTakesPart) {
                  }),
                  std::runtime_error);
     EXPECT_THROW(with_crew([](Crew&) { throw std::invalid_argument("stage"); }), std::invalid_argument);
-  }
-}
-
-// parallel_sort gives std::sort's sequence for a strict total order, at any thread count and
-// on either side of the piece size; its pieces are sorted and merged apart and the sequence is
-// the same (keys of few values, ties broken by index).
-TEST(Parallel, ParallelSortIsTheOneSortedSequence) {
-  std::mt19937 rng(7);
-  for (const std::ptrdiff_t n : {std::ptrdiff_t{0}, std::ptrdiff_t{5}, 2 * kSortPiece - 1, 2 * kSortPiece,
-                                 8 * kSortPiece + 12345}) {
-    std::vector<int> key(static_cast<std::size_t>(n));
-    for (int& k : key) k = static_cast<int>(rng() % 97);
-    std::vector<int> order(key.size());
-    std::iota(order.begin(), order.end(), 0);
-    std::shuffle(order.begin(), order.end(), rng);
-    const auto less = [&](int a, int b) { return key[a] != key[b] ? key[a] < key[b] : a < b; };
-    std::vector<int> expected = order;
-    std::sort(expected.begin(), expected.end(), less);
-    for (const int threads : {1, 2, 3, 4, 8}) {
-      SCOPED_TRACE(::testing::Message() << n << " elements, " << threads << " threads");
-      const ThreadLimit limit(threads);
-      std::vector<int> sorted = order;
-      parallel_sort(sorted.begin(), sorted.end(), less);
-      EXPECT_EQ(sorted, expected);
-    }
   }
 }
 
