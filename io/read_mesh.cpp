@@ -874,12 +874,14 @@ Sum sum_over_runs(Item* sorted, std::size_t n, const Run& run) {
   }
   std::vector<Sum> sums(pieces, Sum{});
   parallel_invoke_each(pieces, [&](std::size_t c) {
+    Sum sum{};  // summed here, stored once: pieces' sums share cache lines
     for (std::size_t i = start[c]; i < start[c + 1];) {
       std::size_t j = i + 1;
       while (j < start[c + 1] && sorted[j].key == sorted[i].key) ++j;
-      sums[c] += run(sorted + i, sorted + j);
+      sum += run(sorted + i, sorted + j);
       i = j;
     }
+    sums[c] = std::move(sum);
   });
   Sum total{};
   for (const Sum& sum : sums) total += sum;
@@ -1036,14 +1038,16 @@ LoadedMesh repair(const std::string& path, RawMesh raw, std::string format,
   std::vector<int> kept_before(face_pieces + 1, 0);  // kept faces before piece c, once summed
   for_each_piece(static_cast<std::size_t>(nt), face_pieces, [&](std::size_t c, std::size_t begin,
                                                                 std::size_t end) {
+    int kept_here = 0;  // counted here, stored once: the pieces' counts share cache lines
     for (std::size_t t = begin; t < end; ++t) {
       const auto [a, b, c3] = welded(static_cast<int>(t));
       bool bad = a == b || b == c3 || a == c3;
       if (!bad)
         bad = 0.5 * (point(b) - point(a)).cross(point(c3) - point(a)).norm() <= area_floor;
       degenerate[t] = bad ? 1 : 0;
-      kept_before[c + 1] += bad ? 0 : 1;
+      kept_here += bad ? 0 : 1;
     }
+    kept_before[c + 1] = kept_here;
   });
   std::partial_sum(kept_before.begin(), kept_before.end(), kept_before.begin());
   report.degenerate_faces = nt - kept_before.back();
@@ -1138,6 +1142,7 @@ LoadedMesh repair(const std::string& path, RawMesh raw, std::string format,
     std::vector<int> roots(pieces, 0);
     for_each_piece(static_cast<std::size_t>(nf), pieces, [&](std::size_t c, std::size_t begin,
                                                              std::size_t end) {
+      std::vector<std::pair<int, int>> mine;  // moved in once: the lists' headers share lines
       for (std::size_t f = begin; f < end; ++f)
         for (std::size_t k = 0; k < 3; ++k) {
           const int to = link[3 * f + k];
@@ -1146,8 +1151,9 @@ LoadedMesh repair(const std::string& path, RawMesh raw, std::string format,
           if (g < end)
             components.unite(static_cast<int>(f), static_cast<int>(g));  // roots stay in the piece
           else
-            across[c].emplace_back(static_cast<int>(f), static_cast<int>(g));
+            mine.emplace_back(static_cast<int>(f), static_cast<int>(g));
         }
+      across[c] = std::move(mine);
     });
     for (const auto& pairs : across)
       for (const auto& [f, g] : pairs) components.unite(f, g);
@@ -1156,8 +1162,10 @@ LoadedMesh repair(const std::string& path, RawMesh raw, std::string format,
         components.unite(slots[first].index / 3, slots[i].index / 3);
     for_each_piece(static_cast<std::size_t>(nf), pieces, [&](std::size_t c, std::size_t begin,
                                                              std::size_t end) {
+      int here = 0;
       for (std::size_t f = begin; f < end; ++f)
-        roots[c] += components.parent[f] == static_cast<int>(f) ? 1 : 0;
+        here += components.parent[f] == static_cast<int>(f) ? 1 : 0;
+      roots[c] = here;
     });
     report.components = std::accumulate(roots.begin(), roots.end(), 0);
     if (options.flip) mesh.F.col(1).swap(mesh.F.col(2));
