@@ -165,8 +165,8 @@ struct RawMesh {
 // The reader's loops run in pieces of about kPiece items (at most 64 pieces), side by side on
 // the command's threads; what a piece sums is combined in piece order, so results are the same
 // whatever the thread count. Pieces of 16,384 left a real face's loops (24k-38k triangles) in
-// one or two pieces, on one thread; at 2048 its read is some 20% faster at two threads and
-// 1-2% slower at one (forty-fourth part).
+// one or two pieces, on one thread; at 2048 its read is 10-15% faster at two threads and 1-2%
+// slower at one (forty-fourth part).
 constexpr std::size_t kPiece = 2048;
 std::size_t piece_count(std::size_t n) { return std::clamp<std::size_t>(n / kPiece, 1, 64); }
 
@@ -1162,7 +1162,7 @@ LoadedMesh repair(const std::string& path, RawMesh raw, std::string format,
         components.unite(slots[first].index / 3, slots[i].index / 3);
     for_each_piece(static_cast<std::size_t>(nf), pieces, [&](std::size_t c, std::size_t begin,
                                                              std::size_t end) {
-      int here = 0;
+      int here = 0;  // counted here, stored once
       for (std::size_t f = begin; f < end; ++f)
         here += components.parent[f] == static_cast<int>(f) ? 1 : 0;
       roots[c] = here;
