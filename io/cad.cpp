@@ -254,7 +254,7 @@ ChildEnd run_in_child(const std::function<void()>& work, double seconds) {
 // process; only if that child survives is it read here. Reading twice costs the time of a read.
 CadPart CadPart::read(const std::string& path, double probe_seconds) {
   // The same refusals as a mesh file (not regular, empty, too large) before OCCT sees it.
-  const std::string bytes = read_regular_file(path, kMaxCadFileBytes);
+  const FileBytes bytes = read_regular_file(path, kMaxCadFileBytes);
   // The module is opened before the fork: the child then has it, and no half-opened copy.
   module(path);
   // OCCT's readers trust counts in the file (an IGES edge list of a billion edges from a 6 KB
@@ -274,14 +274,15 @@ CadPart CadPart::read(const std::string& path, double probe_seconds) {
 }
 
 std::unique_ptr<CadPart::Impl> CadPart::read_in_process(const std::string& path) {
-  const std::string bytes = read_regular_file(path, kMaxCadFileBytes);
+  const FileBytes file = read_regular_file(path, kMaxCadFileBytes);
+  const std::string_view bytes = file;
   if (bytes.empty()) fail(path, "empty file");
   auto impl = std::make_unique<Impl>();
   impl->path = path;
   const std::string ext = lower_extension(path);
   const bool step = cad_module::step_extension(ext);
   impl->format = step ? "step" : "iges";
-  if (step && bytes.find("ISO-10303-21") == std::string::npos)
+  if (step && bytes.find("ISO-10303-21") == std::string_view::npos)
     fail(path, "not a STEP file (no ISO-10303-21 header)");
   impl->shape = module(path).read(path, step, impl->faces, impl->names);
   return impl;

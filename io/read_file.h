@@ -2,16 +2,13 @@
 // its bytes quoted in messages.
 #pragma once
 
-#include <fcntl.h>
-#include <sys/stat.h>
-#include <unistd.h>
-
 #include <algorithm>
 #include <cerrno>
 #include <charconv>
 #include <cmath>
 #include <cstdint>
 #include <cstring>
+#include <memory>
 #include <string>
 #include <string_view>
 #include <system_error>
@@ -33,45 +30,27 @@ inline std::string quote_text(std::string_view text, std::size_t max = 24) {
   return out + "'";
 }
 
+// A file's bytes, read whole by read_regular_file, in storage that nothing writes before the
+// read does (a std::string of the size would be zeroed first, and reading through a small
+// buffer copied every byte twice: 0.10 ms of Rotor 67 upper's 1.9 MB, 0.05 ms so).
+class FileBytes {
+ public:
+  std::string_view view() const { return {data_.get(), size_}; }
+  operator std::string_view() const { return view(); }
+  std::size_t size() const { return size_; }
+  bool empty() const { return size_ == 0; }
+
+ private:
+  friend FileBytes read_regular_file(const std::string& path, std::uint64_t max_bytes);
+  std::unique_ptr<char[]> data_;
+  std::size_t size_ = 0;
+};
+
 // The whole content of `path`. Only a regular file of at most `max_bytes` is read: a FIFO
 // would block and /dev/zero never ends, so anything else is refused from stat, and the
-// file is opened non-blocking and checked again in case it was swapped in between.
-// Throws io::Error("PATH: problem").
-inline std::string read_regular_file(const std::string& path, std::uint64_t max_bytes) {
-  const auto fail = [&](const std::string& problem) { throw Error(path + ": " + problem); };
-  const auto check = [&](const struct stat& st) {
-    if (S_ISDIR(st.st_mode)) fail("cannot open (is a directory)");
-    if (!S_ISREG(st.st_mode)) fail("not a regular file");
-    if (static_cast<std::uint64_t>(st.st_size) > max_bytes)
-      fail("file too large (" + std::to_string(st.st_size) + " bytes; flank reads at most " +
-           std::to_string(max_bytes) + ")");
-  };
-  struct stat st {};
-  if (::stat(path.c_str(), &st) != 0) fail(std::string("cannot open (") + std::strerror(errno) + ")");
-  check(st);
-  const int fd = ::open(path.c_str(), O_RDONLY | O_NONBLOCK | O_NOCTTY | O_CLOEXEC);
-  if (fd < 0) fail(std::string("cannot open (") + std::strerror(errno) + ")");
-  struct Closer {
-    int fd;
-    ~Closer() { ::close(fd); }
-  } closer{fd};
-  if (::fstat(fd, &st) != 0) fail(std::string("cannot open (") + std::strerror(errno) + ")");
-  check(st);
-  std::string data;
-  data.reserve(static_cast<std::size_t>(st.st_size));
-  char buffer[1 << 16];
-  for (;;) {
-    const ssize_t n = ::read(fd, buffer, sizeof buffer);
-    if (n < 0 && errno == EINTR) continue;
-    if (n < 0) fail(std::string("cannot read (") + std::strerror(errno) + ")");
-    if (n == 0) break;
-    // A file that grows while read (or a /proc file, whose size says 0) keeps to the limit.
-    if (data.size() + static_cast<std::size_t>(n) > max_bytes)
-      fail("file too large (more than " + std::to_string(max_bytes) + " bytes)");
-    data.append(buffer, static_cast<std::size_t>(n));
-  }
-  return data;
-}
+// file is opened non-blocking and checked again in case it was swapped in between. A large
+// file is read in pieces side by side. Throws io::Error("PATH: problem").
+FileBytes read_regular_file(const std::string& path, std::uint64_t max_bytes);
 
 // A whole token as a finite decimal number. from_chars rather than strtod: it neither depends
 // on the locale nor reads hexadecimal, and it raises no floating-point exception on overflow

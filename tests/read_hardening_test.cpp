@@ -19,13 +19,16 @@
 #include <fstream>
 #include <functional>
 #include <numbers>
+#include <random>
 #include <sstream>
 #include <string>
 #include <thread>
 #include <vector>
 
+#include "io/read_file.h"
 #include "io/read_lines.h"
 #include "io/read_mesh.h"
+#include "kernels/parallel.h"
 #include "solver/synth.h"
 #include "tests/test_files.h"
 
@@ -160,6 +163,32 @@ TEST_F(ReadHardening, BytesReadAsTheFile) {
     EXPECT_EQ(file.report.format, bytes.report.format) << name;
   }
   EXPECT_EQ(error_of([] { read_mesh_bytes("x.obj", "v 0 0 0\nf 1 1\n"); }).rfind("x.obj: ", 0), 0u);
+}
+
+// A file is read whole and byte for byte, in pieces side by side when it is large: sizes
+// around the pieces' bounds, at one thread and at two; a file whose size says 0 (/proc) is
+// read to its end; one larger than the limit is refused, before and while it is read.
+TEST_F(ReadHardening, FilesAreReadByteForByte) {
+  std::mt19937 rng(5);
+  for (const std::size_t size : {std::size_t{0}, std::size_t{1}, std::size_t{65536},
+                                 std::size_t{1} << 20, (std::size_t{3} << 20) + 7}) {
+    std::string content(size, '\0');
+    for (char& c : content) c = static_cast<char>(rng());
+    const std::string path = write("bytes.bin", content);
+    for (const int threads : {1, 2}) {
+      const ThreadLimit limit(threads);
+      const FileBytes read = read_regular_file(path, std::uint64_t{1} << 30);
+      EXPECT_EQ(read.size(), size) << threads << " threads";
+      EXPECT_TRUE(read.view() == content) << size << " bytes, " << threads << " threads";
+    }
+  }
+  const FileBytes status = read_regular_file("/proc/self/status", 1 << 20);
+  EXPECT_EQ(status.view().substr(0, 5), "Name:");
+  const std::string big = write("big.bin", std::string(100, 'x'));
+  EXPECT_EQ(error_of([&] { read_regular_file(big, 50); }),
+            big + ": file too large (100 bytes; flank reads at most 50)");
+  EXPECT_EQ(error_of([] { read_regular_file("/proc/self/status", 16); }),
+            "/proc/self/status: file too large (more than 16 bytes)");
 }
 
 // Row 6. 20 MB of binary 255-gons on uchar indices would make 20.7 M triangles (2.5 GB): the
