@@ -58,7 +58,7 @@ TEST(SubdivideMidpoint, EmptyMeshStaysEmpty) {
 }
 
 // The edge slots come out in exactly std::sort's order of (vertex pair, slot), at any thread
-// count: on a real part, on random faces over few vertices (edges shared by many faces, so
+// count: on a real part, on random faces over few vertices or many (edges shared by many faces, so
 // equal keys), with a fan whose centre has hundreds of edges (a bucket sorted by std::sort,
 // not by insertion), with faces repeated (the same key in many slots), and with none.
 TEST(SortedEdgeSlots, EqualStdSortOfTheKeyedSlots) {
@@ -74,7 +74,7 @@ TEST(SortedEdgeSlots, EqualStdSortOfTheKeyedSlots) {
   };
   std::vector<Mesh> meshes{io::read_mesh(FLANK_TEST_DATA_DIR "/../../data/propeller_blade_upper.stl").mesh};
   std::mt19937 rng(11);
-  for (const int nv : {3, 40, 5000}) {
+  for (const int nv : {3, 40, 5000, 40000}) {  // 40000: faces and vertices in several chunks
     Mesh m;
     m.V = Points::Random(nv, 3);
     m.F.resize(3 * nv, 3);
@@ -96,7 +96,7 @@ TEST(SortedEdgeSlots, EqualStdSortOfTheKeyedSlots) {
   meshes.emplace_back();
   for (const Mesh& m : meshes) {
     const std::vector<KeyedIndex> want = expected(m);
-    for (const int threads : {1, 2}) {
+    for (const int threads : {1, 2, 3}) {
       const ThreadLimit limit(threads);
       const Buffer<KeyedIndex> got = sorted_edge_slots(m);
       ASSERT_EQ(got.size(), want.size());
