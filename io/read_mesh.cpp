@@ -903,8 +903,14 @@ struct EdgeRuns {
 };
 
 struct UnionFind {
-  std::vector<int> parent;
-  explicit UnionFind(int n) : parent(n) { std::iota(parent.begin(), parent.end(), 0); }
+  Buffer<int> parent;
+  explicit UnionFind(int n) : parent(static_cast<std::size_t>(n)) {
+    std::iota(parent.begin(), parent.end(), 0);
+  }
+  // Every element on its own, set by the caller (parent[x] = x) before it is used: in pieces,
+  // on their threads, where a serial start would write them all first.
+  struct Unset {};
+  UnionFind(int n, Unset) : parent(static_cast<std::size_t>(n)) {}
   int find(int x) {
     while (parent[x] != x) x = parent[x] = parent[parent[x]];
     return x;
@@ -916,14 +922,17 @@ struct UnionFind {
 };
 
 // Removes every face on the same three vertices as an earlier face, in any order or
-// orientation, keeping the first; returns how many went. Copies make decompose crawl and
-// turn every edge non-manifold (issue 14 rows 8, 9): a part written twice reads as the part.
-int drop_duplicate_faces(std::vector<int>& triangles) {
+// orientation, keeping the first, and moves the faces kept to the front of `triangles`;
+// returns how many went. Copies make decompose crawl and turn every edge non-manifold (issue
+// 14 rows 8, 9): a part written twice reads as the part.
+int drop_duplicate_faces(std::span<int> triangles) {
   const std::size_t nf = triangles.size() / 3;
   // Faces sorted by a 32-bit hash of their sorted vertices, then by index (as the points are).
   Buffer<std::array<int, 3>> vertices(nf);
   Buffer<KeyedIndex> order(nf);
+  Buffer<char> duplicate(nf);
   parallel_for(0, nf, [&](std::size_t begin, std::size_t end) {
+    std::fill(duplicate.data() + begin, duplicate.data() + end, 0);
     for (std::size_t f = begin; f < end; ++f) {
       // Sorted by minima and maxima, without branches: a comparison sort branches on the
       // vertices' order, which changes from face to face on some parts (this loop took
@@ -938,7 +947,6 @@ int drop_duplicate_faces(std::vector<int>& triangles) {
     }
   }, kPiece);
   radix_sort_by_key(order, 32);
-  std::vector<char> duplicate(nf, 0);
   const auto run = [&](KeyedIndex* first, KeyedIndex* last) {
     if (last - first == 1) return 0;
     std::sort(first, last, [&](const KeyedIndex& a, const KeyedIndex& b) {
@@ -956,7 +964,6 @@ int drop_duplicate_faces(std::vector<int>& triangles) {
   for (std::size_t f = 0; f < nf; ++f)
     if (!duplicate[f])
       for (int k = 0; k < 3; ++k) triangles[out++] = triangles[3 * f + k];
-  triangles.resize(out);
   return dropped;
 }
 
@@ -986,7 +993,7 @@ LoadedMesh repair(const std::string& path, RawMesh raw, std::string format,
     }
   }, kPiece);
   radix_sort_by_key(order, 32);
-  std::vector<int> representative(static_cast<std::size_t>(nv));
+  Buffer<int> representative(static_cast<std::size_t>(nv));  // every point's set by its run
   const auto same_point = [&](int a, int b) {
     return std::equal(coord(a), coord(a) + 3, coord(b));
   };
@@ -1058,7 +1065,7 @@ LoadedMesh repair(const std::string& path, RawMesh raw, std::string format,
   if (kept_before.back() == 0)
     fail(path, nt == 1 ? std::string("the only triangle is degenerate")
                        : "all " + std::to_string(nt) + " triangles are degenerate");
-  std::vector<int> kept(3 * static_cast<std::size_t>(kept_before.back()));
+  Buffer<int> kept(3 * static_cast<std::size_t>(kept_before.back()));
   for_each_piece(static_cast<std::size_t>(nt), face_pieces, [&](std::size_t c, std::size_t begin,
                                                                 std::size_t end) {
     auto next = kept.begin() + 3 * static_cast<std::ptrdiff_t>(kept_before[c]);
@@ -1066,11 +1073,11 @@ LoadedMesh repair(const std::string& path, RawMesh raw, std::string format,
       if (!degenerate[t]) next = std::ranges::copy(welded(static_cast<int>(t)), next).out;
   });
   report.duplicate_faces = drop_duplicate_faces(kept);
-  const int nf = static_cast<int>(kept.size() / 3);
+  const int nf = kept_before.back() - report.duplicate_faces;  // in front of `kept`
 
   // Remove unused vertices, keeping the file's order.
   std::vector<char> used(static_cast<std::size_t>(nv), 0);
-  parallel_for(0, kept.size(), [&](std::size_t begin, std::size_t end) {
+  parallel_for(0, 3 * static_cast<std::size_t>(nf), [&](std::size_t begin, std::size_t end) {
     for (std::size_t i = begin; i < end; ++i)
       std::atomic_ref<char>(used[kept[i]]).store(1, std::memory_order_relaxed);
   }, 3 * kPiece);
@@ -1085,7 +1092,7 @@ LoadedMesh repair(const std::string& path, RawMesh raw, std::string format,
   report.unused_vertices = unique - used_count;
   Mesh& mesh = out.mesh;
   mesh.V.resize(used_count, 3);
-  std::vector<int> new_index(static_cast<std::size_t>(nv), -1);
+  Buffer<int> new_index(static_cast<std::size_t>(nv));  // read only where used: set there
   for_each_piece(static_cast<std::size_t>(nv), vertex_pieces, [&](std::size_t c, std::size_t begin,
                                                                   std::size_t end) {
     int next = used_before[c];
@@ -1140,13 +1147,14 @@ LoadedMesh repair(const std::string& path, RawMesh raw, std::string format,
   // components then come from a union-find in pieces of faces, side by side (links within a
   // piece), then over the links between pieces and the non-manifold edges.
   if (!edges.same) {
-    UnionFind components(nf);
+    UnionFind components(nf, UnionFind::Unset{});
     const std::size_t pieces = piece_count(static_cast<std::size_t>(nf));
     std::vector<std::vector<std::pair<int, int>>> across(pieces);  // face pairs, per piece
     std::vector<int> roots(pieces, 0);
     for_each_piece(static_cast<std::size_t>(nf), pieces, [&](std::size_t c, std::size_t begin,
                                                              std::size_t end) {
       std::vector<std::pair<int, int>> mine;  // moved in once: the lists' headers share lines
+      std::iota(components.parent.begin() + begin, components.parent.begin() + end, static_cast<int>(begin));
       for (std::size_t f = begin; f < end; ++f)
         for (std::size_t k = 0; k < 3; ++k) {
           const int to = link[3 * f + k];
