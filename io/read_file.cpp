@@ -86,7 +86,8 @@ FileBytes read_regular_file(const std::string& path, std::uint64_t max_bytes) {
     const std::ptrdiff_t n = read_at(data.get() + size, capacity - size, size);
     if (n < 0) fail("cannot read" + why(errno));
     size += static_cast<std::size_t>(n);
-    if (size > max_bytes) fail("file too large (more than " + std::to_string(max_bytes) + " bytes)");
+    if (size > max_bytes)
+      fail("file too large (more than " + std::to_string(max_bytes) + " bytes)");
     whole = size == capacity;  // short of it: the end came first
   }
   FileBytes out;

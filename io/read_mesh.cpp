@@ -1154,7 +1154,8 @@ LoadedMesh repair(const std::string& path, RawMesh raw, std::string format,
     for_each_piece(static_cast<std::size_t>(nf), pieces, [&](std::size_t c, std::size_t begin,
                                                              std::size_t end) {
       std::vector<std::pair<int, int>> mine;  // moved in once: the lists' headers share lines
-      std::iota(components.parent.begin() + begin, components.parent.begin() + end, static_cast<int>(begin));
+      std::iota(components.parent.begin() + begin, components.parent.begin() + end,
+                static_cast<int>(begin));
       for (std::size_t f = begin; f < end; ++f)
         for (std::size_t k = 0; k < 3; ++k) {
           const int to = link[3 * f + k];

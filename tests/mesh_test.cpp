@@ -58,9 +58,10 @@ TEST(SubdivideMidpoint, EmptyMeshStaysEmpty) {
 }
 
 // The edge slots come out in exactly std::sort's order of (vertex pair, slot), at any thread
-// count: on a real part, on random faces over few vertices or many (edges shared by many faces, so
-// equal keys), with a fan whose centre has hundreds of edges (a bucket sorted by std::sort,
-// not by insertion), with faces repeated (the same key in many slots), and with none.
+// count: on a real part, on random faces over few vertices (edges shared by many faces, so
+// equal keys) or many (faces and vertices in several chunks), with a fan whose centre has
+// hundreds of edges (a bucket sorted by std::sort, not by insertion), with faces repeated
+// (the same key in many slots), and with none.
 TEST(SortedEdgeSlots, EqualStdSortOfTheKeyedSlots) {
   const auto expected = [](const Mesh& m) {
     std::vector<KeyedIndex> e;
@@ -74,7 +75,7 @@ TEST(SortedEdgeSlots, EqualStdSortOfTheKeyedSlots) {
   };
   std::vector<Mesh> meshes{io::read_mesh(FLANK_TEST_DATA_DIR "/../../data/propeller_blade_upper.stl").mesh};
   std::mt19937 rng(11);
-  for (const int nv : {3, 40, 5000, 40000}) {  // 40000: faces and vertices in several chunks
+  for (const int nv : {3, 40, 5000, 40000}) {
     Mesh m;
     m.V = Points::Random(nv, 3);
     m.F.resize(3 * nv, 3);
