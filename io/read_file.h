@@ -32,7 +32,9 @@ inline std::string quote_text(std::string_view text, std::size_t max = 24) {
 
 // A file's bytes, read whole by read_regular_file, in storage that nothing writes before the
 // read does (a std::string of the size would be zeroed first, and reading through a small
-// buffer copied every byte twice: 0.10 ms of Rotor 67 upper's 1.9 MB, 0.05 ms so).
+// buffer copied every byte twice: 0.10 ms of Rotor 67 upper's 1.9 MB, 0.05 ms so). Its view
+// lives as long as it does: pass read_regular_file(...) straight to a string_view parameter,
+// or keep the FileBytes in a variable; a string_view initialised from the call dangles.
 class FileBytes {
  public:
   std::string_view view() const { return {data_.get(), size_}; }
