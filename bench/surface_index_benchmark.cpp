@@ -22,7 +22,7 @@ constexpr double kSize = 100.0;       // mm
 constexpr double kClearance = 5.0;    // query height above Φ
 constexpr double kLineLength = 10.0;  // mm
 constexpr int kSamplesPerLine = 30;   // DESIGN: n = 30 samples per line
-constexpr int kLines = 2048;
+constexpr int kIndexLines = 2048;
 
 double height(double x, double y) { return 5.0 * std::sin(x / 20.0) * std::cos(y / 15.0); }
 
@@ -47,13 +47,13 @@ Mesh wavy_grid(int triangles_k) {
   return m;
 }
 
-// kLines lines of kSamplesPerLine consecutive query points (row l * kSamplesPerLine + i).
+// kIndexLines lines of kSamplesPerLine consecutive query points (row l * kSamplesPerLine + i).
 Points line_queries(unsigned seed) {
   std::mt19937 rng(seed);
   std::uniform_real_distribution<double> pos(10.0, kSize - 10.0);
   std::uniform_real_distribution<double> angle(0.0, 2.0 * std::numbers::pi);
-  Points Q(kLines * kSamplesPerLine, 3);
-  for (int l = 0; l < kLines; ++l) {
+  Points Q(kIndexLines * kSamplesPerLine, 3);
+  for (int l = 0; l < kIndexLines; ++l) {
     const double x0 = pos(rng), y0 = pos(rng), t = angle(rng);
     for (int i = 0; i < kSamplesPerLine; ++i) {
       const double s = kLineLength * i / (kSamplesPerLine - 1);
@@ -94,7 +94,7 @@ void BM_ClosestPoints(benchmark::State& state) {
   std::vector<int> faces(static_cast<std::size_t>(w.queries.rows()));
   for (auto _ : state) {
     parallel_for(
-        0, kLines,
+        0, kIndexLines,
         [&](std::size_t begin, std::size_t end) {
           for (std::size_t l = begin; l < end; ++l) {
             int hint = -1;
