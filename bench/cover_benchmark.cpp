@@ -4,9 +4,10 @@
 // thousands of times, so that a change to them is judged on medians, in one run.
 //
 // The pool is made, not grown: on a real face (HECC a, Rotor 67 upper), the Φ vertices within
-// a random distance of a random vertex (3-15% of the diagonal, small ones more often), as many
-// entries as decompose's pools hold (150), each list in vertex order as evaluate_patch makes
-// them. Its overlaps are those of patches on one surface, without the minutes of fitting.
+// a random distance of a random vertex (3-15% of the diagonal, small ones more often), 48
+// entries (decompose's pools on these faces hold some 40-50), each list in vertex order as
+// evaluate_patch makes them. Its overlaps are those of patches on one surface, without the minutes
+// of fitting.
 //
 //   Cover/extend/<part>/idle_us:<0|1000>/threads:<1|2>   extend_cover from an empty cover
 //                            (decompose's covers of the whole pool: greedy picks, 8 swaps)
@@ -17,14 +18,16 @@
 // other thread has gone to sleep, as in decompose, where a cover follows serial work and
 // the crew's helper must be woken (kernels/parallel.h, with_crew); 0: calls back to back.
 //
-// On 2026-11-30 (medians of three repetitions, one run; 1 / 2 threads, idle 0 and 1000 µs):
-// extend on HECC a 1962 / 1048 and 1943 / 1055 µs (efficiency 0.94, 0.92), on Rotor 67
-// upper 900 / 507 and 912 / 531 µs (0.89, 0.86); improve on HECC a 1504 / 779 and
-// 1502 / 789 µs (0.97, 0.95), on Rotor 67 upper 356 / 191 and 345 / 206 µs (0.93, 0.84).
-// From run to run the two-thread medians moved by up to a tenth: compare builds alternated.
+// On 2026-11-30 (medians of five repetitions, one run; 1 / 2 threads, idle 0 and 1000 µs):
+// extend on HECC a 519 / 300 and 539 / 327 µs (efficiency 0.87, 0.82), on Rotor 67 upper
+// 386 / 250 and 390 / 275 µs (0.77, 0.71); improve on HECC a 313 / 179 and 317 / 197 µs
+// (0.87, 0.80), on Rotor 67 upper 177 / 106 and 176 / 121 µs (0.83, 0.73): the efficiencies
+// decompose's cover stage shows. From run to run a two-thread median moved by up to a
+// third (improve on HECC a, idle 0: 179 and 252 µs): compare builds alternated.
 #include <benchmark/benchmark.h>
 
 #include <chrono>
+#include <map>
 #include <random>
 #include <string>
 #include <vector>
@@ -44,9 +47,8 @@ struct CoverCase {
 };
 
 const CoverCase& cover_case(const std::string& file) {
-  static std::vector<std::pair<std::string, CoverCase>> cases;
-  for (const auto& [name, c] : cases)
-    if (name == file) return c;
+  static std::map<std::string, CoverCase> cases;  // its entries stay where they are
+  if (const auto found = cases.find(file); found != cases.end()) return found->second;
   const Mesh mesh = io::read_mesh(FLANK_TEST_DATA_DIR "/" + file).mesh;
   CoverCase c;
   c.area = vertex_areas(mesh);
@@ -54,7 +56,7 @@ const CoverCase& cover_case(const std::string& file) {
   std::mt19937 rng(5);
   std::uniform_real_distribution<double> unit(0.0, 1.0);
   const int V = mesh.vertex_count();
-  for (int k = 0; k < 150; ++k) {
+  for (int k = 0; k < 48; ++k) {
     const Vec3 center = mesh.V.row(static_cast<int>(rng() % static_cast<unsigned>(V))).transpose();
     const double u = unit(rng), radius = diagonal * (0.03 + 0.12 * u * u);
     Patch p;
@@ -65,8 +67,7 @@ const CoverCase& cover_case(const std::string& file) {
   }
   c.greedy = empty_cover(c.area);
   greedy_cover(c.pool, c.area, CoverOptions{}, &c.greedy);
-  cases.emplace_back(file, std::move(c));
-  return cases.back().second;
+  return cases.emplace(file, std::move(c)).first->second;
 }
 
 using Clock = std::chrono::steady_clock;
