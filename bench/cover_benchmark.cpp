@@ -32,6 +32,7 @@
 #include <string>
 #include <vector>
 
+#include "bench/runs.h"
 #include "io/read_mesh.h"
 #include "kernels/mesh.h"
 #include "kernels/parallel.h"
@@ -72,19 +73,13 @@ const CoverCase& cover_case(const std::string& file) {
 
 using Clock = std::chrono::steady_clock;
 
-void stay_alone(std::chrono::microseconds span) {
-  const Clock::time_point until = Clock::now() + span;
-  while (Clock::now() < until) {
-  }
-}
-
 void BM_CoverExtend(benchmark::State& state, const std::string& file) {
   const CoverCase& c = cover_case(file);
   const std::chrono::microseconds idle(state.range(0));
   const ThreadLimit limit(static_cast<int>(state.range(1)));
   for (auto _ : state) {
     Cover cover = empty_cover(c.area);
-    stay_alone(idle);
+    bench::spin_for(idle);
     const Clock::time_point start = Clock::now();
     extend_cover(c.pool, c.area, CoverOptions{}, 8, &cover);
     state.SetIterationTime(std::chrono::duration<double>(Clock::now() - start).count());
@@ -99,7 +94,7 @@ void BM_CoverImprove(benchmark::State& state, const std::string& file) {
   const ThreadLimit limit(static_cast<int>(state.range(1)));
   for (auto _ : state) {
     Cover cover = c.greedy;  // a round improves the cover it has
-    stay_alone(idle);
+    bench::spin_for(idle);
     const Clock::time_point start = Clock::now();
     improve_cover(c.pool, c.area, 8, &cover);
     state.SetIterationTime(std::chrono::duration<double>(Clock::now() - start).count());

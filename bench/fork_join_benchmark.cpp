@@ -16,6 +16,7 @@
 #include <chrono>
 #include <cstdint>
 
+#include "bench/runs.h"
 #include "kernels/parallel.h"
 
 namespace flank {
@@ -23,19 +24,13 @@ namespace {
 
 using Clock = std::chrono::steady_clock;
 
-void spin(std::chrono::microseconds span) {
-  const Clock::time_point until = Clock::now() + span;
-  while (Clock::now() < until) {
-  }
-}
-
 void BM_ForkJoin(benchmark::State& state) {
   const std::chrono::microseconds work(state.range(0)), idle(state.range(1));
   const ThreadLimit limit(static_cast<int>(state.range(2)));
   for (auto _ : state) {
-    spin(idle);
+    bench::spin_for(idle);
     const Clock::time_point start = Clock::now();
-    parallel_invoke_each(2, [&](std::size_t) { spin(work); });
+    parallel_invoke_each(2, [&](std::size_t) { bench::spin_for(work); });
     state.SetIterationTime(std::chrono::duration<double>(Clock::now() - start).count());
   }
   state.counters["work_s"] = std::chrono::duration<double>(work).count();

@@ -16,6 +16,14 @@
 
 namespace flank::bench {
 
+// Spins on the calling thread for `span`, reading the clock: work of a known length, or a
+// wait during which the other threads find nothing to do and go idle.
+inline void spin_for(std::chrono::microseconds span) {
+  const auto until = std::chrono::steady_clock::now() + span;
+  while (std::chrono::steady_clock::now() < until) {
+  }
+}
+
 // decompose on `mesh` (its BVH built inside the timing) at tolerance_rel × diagonal.
 // Counters: seconds per stage, triangles, patches, coverage, lines scored, candidates grown,
 // growths and searches reused.
