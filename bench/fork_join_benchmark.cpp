@@ -11,10 +11,14 @@
 // in a throwaway oneTBB program the other thread started 79-83 µs after a task_group's fork
 // (the idle vCPU's wake-up). A stage that forks once then needs about 1.6 ms of one thread's
 // work to reach an efficiency of 0.9.
+//
+// BM_CrewSteps, below: what a crew's short steps cost, the other threads already awake.
 #include <benchmark/benchmark.h>
 
+#include <array>
 #include <chrono>
 #include <cstdint>
+#include <functional>
 
 #include "bench/runs.h"
 #include "kernels/parallel.h"
@@ -39,6 +43,53 @@ BENCHMARK(BM_ForkJoin)
     ->ArgNames({"work_us", "idle_us", "threads"})
     ->ArgsProduct({{100, 250, 500, 1000, 2000}, {1000}, {1, 2}})
     ->UseManualTime()
+    ->Unit(benchmark::kMicrosecond);
+
+// A crew's steps (kernels/parallel.h, with_crew), as the cover's greedy picks and swaps make
+// them: a crew of 20 steps of `chunks` chunks, each `iterations` dependent multiply-adds (some
+// 1.35 ns each here) that write a cache line of their own. One thread runs every chunk; two
+// ideally take half the time. What two take beyond half is the crew's own cost: the step's
+// hand-over and, per chunk, the shared counter of chunks taken, whose cache line passes from
+// one thread to the other.
+//
+// On 2026-11-30 (medians of four runs alternated with a build that changed the crew; µs per
+// crew of 20 steps, 1 / 2 threads): 40 chunks of 100 multiply-adds 76 / 83, of 300: 301 /
+// 189, of 1000: 1090 / 580; 200 chunks of 200: 941 / 645 (in a run a quarter hour earlier,
+// 948 at two threads: compare builds alternated). A step of chunks under half a microsecond
+// gains little from the second thread. Taking several chunks at a claim, an eighth of those
+// left (with the two counters on cache lines of their own and each thread's chunks counted
+// once), gave 64, 171, 568 and 503 µs at two threads, but the cover's calls (Cover/) and
+// decompose's cover stage ran no faster: their chunks are longer, and longest first, where a
+// claim of several would take the longest together (issue 13, forty-seventh part).
+struct ChunkResults {
+  alignas(64) std::array<double, 8> scale{};  // 0, read by every chunk: its work depends on it
+  alignas(64) std::array<double, 8 * 200> of{};  // chunk c's at 8 c: a cache line each
+};
+
+void BM_CrewSteps(benchmark::State& state) {
+  const auto chunks = static_cast<std::size_t>(state.range(0));
+  const auto iterations = static_cast<int>(state.range(1));
+  const ThreadLimit limit(static_cast<int>(state.range(2)));
+  constexpr int kSteps = 20;
+  static ChunkResults results;
+  const std::function<void(std::size_t, std::size_t)> chunk = [&](std::size_t b, std::size_t e) {
+    for (std::size_t c = b; c < e; ++c) {
+      double x = 1.0 + static_cast<double>(c) * results.scale[0];
+      for (int i = 0; i < iterations; ++i) x = x * 1.0000001 + 1e-9;
+      results.of[8 * c] = x;
+    }
+  };
+  for (auto _ : state)
+    with_crew([&](Crew& crew) {
+      for (int step = 0; step < kSteps; ++step) crew.parallel_for(0, chunks, chunk, 1);
+    });
+  state.counters["steps"] = kSteps;
+}
+BENCHMARK(BM_CrewSteps)
+    ->ArgNames({"chunks", "iterations", "threads"})
+    ->ArgsProduct({{40}, {100, 300, 1000}, {1, 2}})
+    ->ArgsProduct({{200}, {200}, {1, 2}})
+    ->UseRealTime()
     ->Unit(benchmark::kMicrosecond);
 
 }  // namespace
