@@ -12,7 +12,7 @@
 // (the idle vCPU's wake-up). A stage that forks once then needs about 1.6 ms of one thread's
 // work to reach an efficiency of 0.9.
 //
-// BM_CrewSteps, below: what a crew's short steps cost, the other threads already awake.
+// BM_CrewSteps, below: what a crew's short steps cost, its helper woken once for 20 of them.
 #include <benchmark/benchmark.h>
 
 #include <array>
@@ -49,8 +49,8 @@ BENCHMARK(BM_ForkJoin)
 // them: a crew of 20 steps of `chunks` chunks, each `iterations` dependent multiply-adds (some
 // 1.35 ns each here) that write a cache line of their own. One thread runs every chunk; two
 // ideally take half the time. What two take beyond half is the crew's own cost: the step's
-// hand-over and, per chunk, the shared counter of chunks taken, whose cache line passes from
-// one thread to the other.
+// hand-over and, per chunk, the shared counters (chunks taken, chunks run), whose cache line
+// passes from one thread to the other.
 //
 // On 2026-11-30 (medians of four runs alternated with a build that changed the crew; µs per
 // crew of 20 steps, 1 / 2 threads): 40 chunks of 100 multiply-adds 76 / 83, of 300: 301 /
@@ -61,9 +61,11 @@ BENCHMARK(BM_ForkJoin)
 // once), gave 64, 171, 568 and 503 µs at two threads, but the cover's calls (Cover/) and
 // decompose's cover stage ran no faster: their chunks are longer, and longest first, where a
 // claim of several would take the longest together (issue 13, forty-seventh part).
+constexpr std::size_t kMostChunks = 200;
+
 struct ChunkResults {
   alignas(64) std::array<double, 8> scale{};  // 0, read by every chunk: its work depends on it
-  alignas(64) std::array<double, 8 * 200> of{};  // chunk c's at 8 c: a cache line each
+  alignas(64) std::array<double, 8 * kMostChunks> of{};  // chunk c's at 8 c: a cache line each
 };
 
 void BM_CrewSteps(benchmark::State& state) {
@@ -71,6 +73,10 @@ void BM_CrewSteps(benchmark::State& state) {
   const auto iterations = static_cast<int>(state.range(1));
   const ThreadLimit limit(static_cast<int>(state.range(2)));
   constexpr int kSteps = 20;
+  if (chunks > kMostChunks) {
+    state.SkipWithError("more chunks than ChunkResults holds");
+    return;
+  }
   static ChunkResults results;
   const std::function<void(std::size_t, std::size_t)> chunk = [&](std::size_t b, std::size_t e) {
     for (std::size_t c = b; c < e; ++c) {
