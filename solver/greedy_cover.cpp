@@ -1,6 +1,7 @@
 #include "solver/greedy_cover.h"
 
 #include <algorithm>
+#include <cstdint>
 #include <limits>
 #include <numeric>
 #include <span>
@@ -154,36 +155,58 @@ void greedy_on(Crew& crew, const std::vector<Patch>& pool, const VecX& area, con
   }
 }
 
-// Per vertex, how many of `picks` (pool indices) cover it.
-std::vector<int> count_covering(const std::vector<Patch>& pool, const VecX& area, const std::vector<int>& picks) {
-  std::vector<int> count(static_cast<std::size_t>(area.size()), 0);
+// Per vertex, how many picks cover it (the word's high bits) and the sum of their slots,
+// their indices into the picks (its low kSlotBits): where one pick covers a vertex, the sum
+// is that pick's slot. One word a vertex: the swaps' sums read one array where they read two,
+// and a tally's build and updates write one. A count is at most P and a sum at most P² / 2:
+// a 32-bit word (8 bits and 24) holds both for up to kNarrowPicks picks, which covers every
+// default run (20 patches at most), and a 64-bit word (32 and 32) for any cover the command
+// line allows.
+template <class Word>
+using Tally = std::vector<Word>;
+template <class Word>
+constexpr int kSlotBits = sizeof(Word) == 4 ? 24 : 32;
+template <class Word>
+constexpr Word kOnePick = Word{1} << kSlotBits<Word>;
+constexpr std::size_t kNarrowPicks = 255;
+
+// Per vertex, how many of `picks` (pool indices) cover it, as a Tally without the slots.
+template <class Word>
+Tally<Word> count_covering(const std::vector<Patch>& pool, const VecX& area,
+                           const std::vector<int>& picks) {
+  Tally<Word> count(static_cast<std::size_t>(area.size()), 0);
   for (int k : picks)
-    for (int v : pool[static_cast<std::size_t>(k)].covered_vertices) ++count[static_cast<std::size_t>(v)];
+    for (int v : pool[static_cast<std::size_t>(k)].covered_vertices)
+      count[static_cast<std::size_t>(v)] += kOnePick<Word>;
   return count;
 }
 
+template <class Word>
 void order_on(Crew& crew, const std::vector<Patch>& pool, const VecX& area, double total, std::vector<int> picks,
-              Cover* c, std::vector<int> count = {});
+              Cover* c, Tally<Word> count = {});
 
 // improve_cover's swaps of `picks` (pool indices, the cover's picks), with `crew` for the
-// sums. Returns count_covering of the picks it leaves.
-std::vector<int> swap_picks(Crew& crew, const std::vector<Patch>& pool, const VecX& area, int max_swaps,
-                            double total_area, std::vector<int>& picks) {
+// sums. Returns the Tally of the picks it leaves.
+template <class Word>
+Tally<Word> swap_picks(Crew& crew, const std::vector<Patch>& pool, const VecX& area, int max_swaps,
+                       double total_area, std::vector<int>& picks) {
+  constexpr Word kOne = kOnePick<Word>;
   const std::size_t V = static_cast<std::size_t>(area.size());
   const std::size_t P = picks.size();
-  // Per vertex, how many picks cover it and the sum of their slots (indices into `picks`):
-  // where one pick covers a vertex, the sum is that pick's slot. A swap keeps the slot of the
-  // pick it takes out for the one it puts in, so both move only on the two patches' vertices.
-  // (A sum is at most P² / 2: an int holds it for any cover the command line allows.)
-  std::vector<int> count(V, 0), slots(V, 0);
-  const auto add = [&](std::size_t k, int by, int slot) {  // entry k's vertices, `by` times at `slot`
-    for (int v : pool[k].covered_vertices)
-      count[static_cast<std::size_t>(v)] += by, slots[static_cast<std::size_t>(v)] += by * slot;
+  // The picks' Tally. A swap keeps the slot of the pick it takes out for the one it puts in,
+  // so the tally moves only on the two patches' vertices.
+  Tally<Word> tally(V, 0);
+  const auto add = [&](std::size_t k, Word word) {  // to entry k's vertices
+    for (int v : pool[k].covered_vertices) tally[static_cast<std::size_t>(v)] += word;
   };
+  const auto take = [&](std::size_t k, Word word) {  // from entry k's vertices
+    for (int v : pool[k].covered_vertices) tally[static_cast<std::size_t>(v)] -= word;
+  };
+  const auto pick_at = [&](std::size_t slot) { return static_cast<Word>(kOne + slot); };
   std::vector<int> slot_of(pool.size(), -1);  // per pool entry: its slot, or −1 if not picked
   for (std::size_t i = 0; i < P; ++i) {
     const auto k = static_cast<std::size_t>(picks[i]);
-    add(k, 1, static_cast<int>(i));
+    add(k, pick_at(i));
     slot_of[k] = static_cast<int>(i);
   }
   // A swap of pick i (out) for entry j (in) gains the area of j's vertices that no pick
@@ -204,20 +227,20 @@ std::vector<int> swap_picks(Crew& crew, const std::vector<Patch>& pool, const Ve
         const std::size_t j = longest[r];
         if (slot_of[j] >= 0) {
           double sum = 0.0;
-          for (int v : pool[j].covered_vertices)
-            if (count[static_cast<std::size_t>(v)] == 1) sum += area(v);
+          for (int v : pool[j].covered_vertices)  // where one pick covers v
+            if (static_cast<Word>(tally[static_cast<std::size_t>(v)] - kOne) < kOne) sum += area(v);
           loss[static_cast<std::size_t>(slot_of[j])] = sum;
           continue;
         }
         double* sum = &gain[j * P];
         std::fill(sum, sum + P, 0.0);
         for (int v : pool[j].covered_vertices) {
-          const int n = count[static_cast<std::size_t>(v)];
+          const Word w = tally[static_cast<std::size_t>(v)];
           const double a = area(v);
-          if (n == 0)
+          if (w == 0)  // no pick
             for (std::size_t i = 0; i < P; ++i) sum[i] += a;
-          else if (n == 1)
-            sum[slots[static_cast<std::size_t>(v)]] += a;
+          else if (static_cast<Word>(w - kOne) < kOne)  // one pick: the low bits are its slot
+            sum[w - kOne] += a;
         }
       }
     }, 1);
@@ -236,22 +259,32 @@ std::vector<int> swap_picks(Crew& crew, const std::vector<Patch>& pool, const Ve
     }
     if (best_out < 0) break;
     const auto out = static_cast<std::size_t>(picks[static_cast<std::size_t>(best_out)]);
-    add(out, -1, best_out);
-    add(static_cast<std::size_t>(best_in), 1, best_out);
+    take(out, pick_at(static_cast<std::size_t>(best_out)));
+    add(static_cast<std::size_t>(best_in), pick_at(static_cast<std::size_t>(best_out)));
     slot_of[out] = -1;
     slot_of[static_cast<std::size_t>(best_in)] = best_out;
     picks[static_cast<std::size_t>(best_out)] = best_in;
   }
-  return count;
+  return tally;
 }
 
-// improve_cover's swaps and rebuild, with `crew` for the sums.
-void improve_on(Crew& crew, const std::vector<Patch>& pool, const VecX& area, int max_swaps, Cover* c) {
+// improve_cover's swaps and rebuild, with `crew` for the sums, tallied in `Word`s.
+template <class Word>
+void improve_with(Crew& crew, const std::vector<Patch>& pool, const VecX& area, int max_swaps,
+                  Cover* c) {
   std::vector<int> picks = c->picks;
   // With every entry picked (the pool of a part one patch covers) there is none to swap in.
-  std::vector<int> count;
-  if (picks.size() < pool.size()) count = swap_picks(crew, pool, area, max_swaps, c->total_area, picks);
-  order_on(crew, pool, area, c->total_area, picks, c, std::move(count));
+  Tally<Word> count;
+  if (picks.size() < pool.size())
+    count = swap_picks<Word>(crew, pool, area, max_swaps, c->total_area, picks);
+  order_on<Word>(crew, pool, area, c->total_area, picks, c, std::move(count));
+}
+
+void improve_on(Crew& crew, const std::vector<Patch>& pool, const VecX& area, int max_swaps, Cover* c) {
+  if (c->picks.size() <= kNarrowPicks)
+    improve_with<std::uint32_t>(crew, pool, area, max_swaps, c);
+  else
+    improve_with<std::uint64_t>(crew, pool, area, max_swaps, c);
 }
 }  // namespace
 
@@ -355,9 +388,11 @@ std::vector<int> greedy_order(const std::vector<Patch>& pool, const VecX& area, 
 }
 
 namespace {
-// elimination_order, with `count` its count_covering of `picks`.
+// elimination_order, with `count` the Tally of `picks` (its counts; the slots' sums, which
+// it does not read, go stale as picks are dropped).
+template <class Word>
 std::vector<int> eliminate(const std::vector<Patch>& pool, const VecX& area, const std::vector<int>& picks,
-                           std::vector<int> count) {
+                           Tally<Word> count) {
   const std::size_t P = picks.size();
   std::vector<int> eliminated;
   std::vector<char> gone(P, 0), fresh(P);
@@ -373,7 +408,9 @@ std::vector<int> eliminate(const std::vector<Patch>& pool, const VecX& area, con
           next = static_cast<int>(i);
       if (next < 0 || (worst >= 0 && bound[static_cast<std::size_t>(next)] > worst_loss)) break;
       const Patch& p = pool[static_cast<std::size_t>(picks[static_cast<std::size_t>(next)])];
-      const double loss = area_where(p.covered_vertices, area, [&](std::size_t v) { return count[v] == 1; });
+      const double loss = area_where(p.covered_vertices, area, [&](std::size_t v) {
+        return count[v] >> kSlotBits<Word> == 1;  // one pick covers v
+      });
       bound[static_cast<std::size_t>(next)] = loss;
       fresh[static_cast<std::size_t>(next)] = 1;
       if (worst < 0 || loss < worst_loss || (loss == worst_loss && next > worst))
@@ -381,7 +418,8 @@ std::vector<int> eliminate(const std::vector<Patch>& pool, const VecX& area, con
     }
     gone[static_cast<std::size_t>(worst)] = 1;
     eliminated.push_back(picks[static_cast<std::size_t>(worst)]);
-    for (int v : pool[static_cast<std::size_t>(eliminated.back())].covered_vertices) --count[static_cast<std::size_t>(v)];
+    for (int v : pool[static_cast<std::size_t>(eliminated.back())].covered_vertices)
+      count[static_cast<std::size_t>(v)] -= kOnePick<Word>;
   }
   std::reverse(eliminated.begin(), eliminated.end());
   return eliminated;
@@ -389,15 +427,17 @@ std::vector<int> eliminate(const std::vector<Patch>& pool, const VecX& area, con
 }  // namespace
 
 std::vector<int> elimination_order(const std::vector<Patch>& pool, const VecX& area, const std::vector<int>& picks) {
-  return eliminate(pool, area, picks, count_covering(pool, area, picks));
+  using Word = std::uint64_t;
+  return eliminate<Word>(pool, area, picks, count_covering<Word>(pool, area, picks));
 }
 
 namespace {
 // order_cover's cover of `picks`, made in `c` (its storage reused: on a part of 129,000
 // vertices a fresh cover's first touch of its pages cost more than the sums); `count` is
 // count_covering of `picks` where the swaps left it, or empty; `total` is area.sum().
+template <class Word>
 void order_on(Crew& crew, const std::vector<Patch>& pool, const VecX& area, double total, std::vector<int> picks,
-              Cover* c, std::vector<int> count) {
+              Cover* c, Tally<Word> count) {
   std::sort(picks.begin(), picks.end());
   // One pick has one order. A cover of that pick alone is that order's cover already: greedy
   // and cover_in_order mark its vertices and sum its blocks the same way, from the same empty
@@ -420,7 +460,7 @@ void order_on(Crew& crew, const std::vector<Patch>& pool, const VecX& area, doub
     if (task == 0) {
       cover_in_order(pool, area, total, greedy_order(pool, area, picks), a);
     } else {
-      if (count.empty()) count = count_covering(pool, area, picks);
+      if (count.empty()) count = count_covering<Word>(pool, area, picks);
       cover_in_order(pool, area, total, eliminate(pool, area, picks, std::move(count)), b);
     }
   }, 1);
@@ -434,7 +474,12 @@ void order_on(Crew& crew, const std::vector<Patch>& pool, const VecX& area, doub
 Cover order_cover(const std::vector<Patch>& pool, const VecX& area, std::vector<int> picks) {
   Cover out;
   const double total = area.sum();
-  with_crew([&](Crew& crew) { order_on(crew, pool, area, total, std::move(picks), &out); });
+  with_crew([&](Crew& crew) {
+    if (picks.size() <= kNarrowPicks)
+      order_on<std::uint32_t>(crew, pool, area, total, std::move(picks), &out);
+    else
+      order_on<std::uint64_t>(crew, pool, area, total, std::move(picks), &out);
+  });
   return out;
 }
 

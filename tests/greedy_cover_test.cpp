@@ -563,6 +563,29 @@ TEST(ImproveCover, SameSwapsAsTakingEachPickOutInTurn) {
   EXPECT_GE(swapped, 10);  // the pools exercise the swaps, not only the rebuild
 }
 
+// The same at 255 picks and at 300: improve_cover keeps each vertex's count and slot sum in
+// one 32-bit word up to 255 picks and in a 64-bit word beyond, where a slot sum outgrows 24
+// bits. Short entries over a long strip, all of them picked up to the cap (no minimum gain).
+TEST(ImproveCover, SameSwapsAsTakingEachPickOutInTurnAtManyPicks) {
+  std::mt19937 rng(17);
+  for (const int max_patches : {255, 300}) {
+    SCOPED_TRACE(::testing::Message() << max_patches << " picks at most");
+    const int V = 6000, P = 400;
+    const VecX area = three_valued_areas(rng, V);
+    std::vector<Patch> pool;
+    for (int k = 0; k < P; ++k) pool.push_back(random_run(rng, V, 12, 2));
+    Cover c = empty_cover(area);
+    greedy_cover(pool, area, take_all(max_patches), &c);
+    ASSERT_EQ(static_cast<int>(c.picks.size()), max_patches);
+    const Cover want = improved_by_taking_each_out(pool, area, 8, c);
+    EXPECT_NE(want.picks, order_cover(pool, area, c.picks).picks);  // the swaps changed it
+    improve_cover(pool, area, 8, &c);
+    EXPECT_EQ(c.picks, want.picks);
+    EXPECT_EQ(c.covered_area, want.covered_area);
+    EXPECT_EQ(c.vertex_patch, want.vertex_patch);
+  }
+}
+
 // The two orders as specified: every pick summed afresh at every step.
 std::vector<int> greedy_order_summing_all(const std::vector<Patch>& pool, const VecX& area,
                                           const std::vector<int>& picks) {
