@@ -170,6 +170,12 @@ template <class Word>
 constexpr Word kOnePick = Word{1} << kSlotBits<Word>;
 constexpr std::size_t kNarrowPicks = 255;
 
+// True when one pick covers the vertex of tally word `w` (its count is 1).
+template <class Word>
+bool one_pick(Word w) {
+  return static_cast<Word>(w - kOnePick<Word>) < kOnePick<Word>;
+}
+
 // Per vertex, how many of `picks` (pool indices) cover it, as a Tally without the slots.
 template <class Word>
 Tally<Word> count_covering(const std::vector<Patch>& pool, const VecX& area,
@@ -228,7 +234,7 @@ Tally<Word> swap_picks(Crew& crew, const std::vector<Patch>& pool, const VecX& a
         if (slot_of[j] >= 0) {
           double sum = 0.0;
           for (int v : pool[j].covered_vertices)  // where one pick covers v
-            if (static_cast<Word>(tally[static_cast<std::size_t>(v)] - kOne) < kOne) sum += area(v);
+            if (one_pick(tally[static_cast<std::size_t>(v)])) sum += area(v);
           loss[static_cast<std::size_t>(slot_of[j])] = sum;
           continue;
         }
@@ -239,7 +245,7 @@ Tally<Word> swap_picks(Crew& crew, const std::vector<Patch>& pool, const VecX& a
           const double a = area(v);
           if (w == 0)  // no pick
             for (std::size_t i = 0; i < P; ++i) sum[i] += a;
-          else if (static_cast<Word>(w - kOne) < kOne)  // one pick: the low bits are its slot
+          else if (one_pick(w))  // the low bits are its slot
             sum[w - kOne] += a;
         }
       }
@@ -408,9 +414,8 @@ std::vector<int> eliminate(const std::vector<Patch>& pool, const VecX& area, con
           next = static_cast<int>(i);
       if (next < 0 || (worst >= 0 && bound[static_cast<std::size_t>(next)] > worst_loss)) break;
       const Patch& p = pool[static_cast<std::size_t>(picks[static_cast<std::size_t>(next)])];
-      const double loss = area_where(p.covered_vertices, area, [&](std::size_t v) {
-        return count[v] >> kSlotBits<Word> == 1;  // one pick covers v
-      });
+      const double loss =
+          area_where(p.covered_vertices, area, [&](std::size_t v) { return one_pick(count[v]); });
       bound[static_cast<std::size_t>(next)] = loss;
       fresh[static_cast<std::size_t>(next)] = 1;
       if (worst < 0 || loss < worst_loss || (loss == worst_loss && next > worst))
