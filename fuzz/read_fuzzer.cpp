@@ -39,6 +39,17 @@ const std::string kName = (std::filesystem::temp_directory_path() /
 const std::string kName = "fuzz.txt";
 #endif
 
+#if defined(FLANK_FUZZ_STEP) || defined(FLANK_FUZZ_IGES)
+// The input file goes when the fuzzer exits (libFuzzer ends a run with exit()): every run
+// had left one in the temp folder.
+struct RemoveAtExit {
+  ~RemoveAtExit() {
+    std::error_code ignored;
+    std::filesystem::remove(kName, ignored);
+  }
+} remove_at_exit;
+#endif
+
 void expect(bool promise) {
   if (!promise) std::abort();
 }

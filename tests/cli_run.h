@@ -28,10 +28,25 @@ struct CliRun {
   std::string out, err;
 };
 
+// The folder of this test process's captured stdout and stderr, removed when the process
+// ends: one a process, each command's two files removed once read (ctest runs every test in
+// a process of its own, and each had left its folder in the temp folder).
+inline const fs::path& capture_dir() {
+  struct Scratch {
+    fs::path path = fs::temp_directory_path() / ("flank_cli_" + std::to_string(::getpid()));
+    Scratch() { fs::create_directories(path); }
+    ~Scratch() {
+      std::error_code ignored;
+      fs::remove_all(path, ignored);
+    }
+  };
+  static const Scratch scratch;
+  return scratch.path;
+}
+
 inline CliRun run(const std::string& args) {
   static int counter = 0;
-  const fs::path dir = fs::temp_directory_path() / ("flank_cli_" + std::to_string(::getpid()));
-  fs::create_directories(dir);
+  const fs::path& dir = capture_dir();
   const fs::path out = dir / ("out" + std::to_string(counter));
   const fs::path err = dir / ("err" + std::to_string(counter++));
   const std::string cmd = std::string(FLANK_BINARY) + " " + args + " >" + out.string() + " 2>" + err.string();
@@ -40,6 +55,9 @@ inline CliRun run(const std::string& args) {
   r.code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
   r.out = testing::slurp(out);
   r.err = testing::slurp(err);
+  std::error_code ignored;
+  fs::remove(out, ignored);
+  fs::remove(err, ignored);
   return r;
 }
 
