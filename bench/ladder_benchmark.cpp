@@ -13,7 +13,8 @@
 //   Ladder/<stage>/<part>/tri_k:<thousands of triangles>/threads:<1|2>
 // Stages:
 //   read       the rung's file read and repaired (io::read_mesh): a face's own STL, a PLY of
-//              the others' meshes, as the command stage reads them.
+//              the others' meshes, as the command stage reads them (its components not
+//              counted: only `flank info` prints them).
 //   index      search tree (oriented boxes, kernels/obb_tree.h) and adjacency build.
 //   query      raw cold closest points (batch, no hints) at the sample points of the scoring
 //              lines: the limit the other stages are measured against.
@@ -428,8 +429,10 @@ void bench_read(benchmark::State& state, Rung r, int threads) {
   const std::filesystem::path input = command_input(r);
   const ThreadLimit limit(threads);
   int triangles = 0;
+  io::ReadOptions as_the_command_reads;  // cli/common.cpp, read_design
+  as_the_command_reads.count_components = false;
   for (auto _ : state) {
-    const io::LoadedMesh m = io::read_mesh(input.string());
+    const io::LoadedMesh m = io::read_mesh(input.string(), as_the_command_reads);
     triangles = m.mesh.face_count();
     benchmark::DoNotOptimize(&m);
   }

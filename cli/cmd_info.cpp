@@ -25,7 +25,7 @@ void register_info(CLI::App& app, int* exit_code) {
       throw UsageError("--tolerance and --tolerance-rel set the tessellation of a STEP or IGES file; " +
                        args->mesh + " is a mesh");
     Progress quiet("info", true);
-    const Design design = read_design(*args, quiet);
+    const Design design = read_design(*args, quiet, /*count_components=*/true);
     if (design.cad) {
       const io::CadPart& part = *design.part;
       std::printf("file            %s (%s, %zu faces)\n", printable(args->mesh).c_str(), part.format().c_str(),

@@ -54,6 +54,7 @@ void register_movability(CLI::App& app, int* exit_code) {
     start_worker_threads();  // while the input is read
     io::ReadOptions ro;
     ro.flip = args->flip;
+    ro.count_components = false;  // the solver does not read them
     const io::LoadedMesh lm = io::read_mesh(args->mesh, ro);
     const SurfaceIndex index(lm.mesh);
     MovabilityOptions mo;

@@ -246,10 +246,11 @@ io::CadTessellation tessellate_within(const io::CadPart& part, const std::vector
 }
 }  // namespace
 
-Design read_design(const PatchArgs& a, Progress& progress) {
+Design read_design(const PatchArgs& a, Progress& progress, bool count_components) {
   Design d;
   io::ReadOptions ro;
   ro.flip = a.flip;
+  ro.count_components = count_components;
   if (!io::is_cad_path(a.mesh)) {
     if (!a.faces.empty()) throw UsageError("--faces picks faces of a STEP or IGES file; " + a.mesh + " is a mesh");
     d.lm = io::read_mesh(a.mesh, ro);

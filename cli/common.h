@@ -56,7 +56,9 @@ struct Design {
   double chord_target = 0.0;     // CAD: the deviation asked of the tessellation, mm
   std::shared_ptr<const io::CadPart> part;  // CAD: the file as read (info lists its faces)
 };
-Design read_design(const PatchArgs& a, Progress& progress);
+// `count_components`: MeshReport::components counted (flank info); the solver's commands
+// leave it −1 (io::ReadOptions says what it costs).
+Design read_design(const PatchArgs& a, Progress& progress, bool count_components = false);
 // --faces "1,3,7-9" → {1, 3, 7, 8, 9}; throws UsageError naming the option.
 std::vector<int> parse_faces(const std::string& text);
 // What the design adds to patches.json's settings: the input format and, for CAD, the faces

@@ -967,6 +967,49 @@ int drop_duplicate_faces(std::span<int> triangles) {
   return dropped;
 }
 
+// The edge-connected components of `nf` faces, oriented consistently: `link` holds, per edge
+// slot, the face across a manifold edge (times two, plus one where both run it the same way)
+// or −1, and `slots` the sorted slots whose non-manifold runs `edges` lists. A union-find in
+// pieces of faces, side by side (links within a piece), then over the links between pieces
+// and the non-manifold edges.
+int linked_components(int nf, const Buffer<int>& link, const Buffer<KeyedIndex>& slots,
+                      const EdgeRuns& edges) {
+  UnionFind components(nf, UnionFind::Unset{});
+  const std::size_t pieces = piece_count(static_cast<std::size_t>(nf));
+  std::vector<std::vector<std::pair<int, int>>> across(pieces);  // face pairs, per piece
+  std::vector<int> roots(pieces, 0);
+  for_each_piece(static_cast<std::size_t>(nf), pieces, [&](std::size_t c, std::size_t begin,
+                                                           std::size_t end) {
+    std::vector<std::pair<int, int>> mine;  // moved in once: the lists' headers share lines
+    std::iota(components.parent.begin() + begin, components.parent.begin() + end,
+              static_cast<int>(begin));
+    for (std::size_t f = begin; f < end; ++f)
+      for (std::size_t k = 0; k < 3; ++k) {
+        const int to = link[3 * f + k];
+        const auto g = static_cast<std::size_t>(to / 2);
+        if (to < 0 || g < f) continue;  // each pair once, from its lower face
+        if (g < end)
+          components.unite(static_cast<int>(f), static_cast<int>(g));  // roots stay in the piece
+        else
+          mine.emplace_back(static_cast<int>(f), static_cast<int>(g));
+      }
+    across[c] = std::move(mine);
+  });
+  for (const auto& pairs : across)
+    for (const auto& [f, g] : pairs) components.unite(f, g);
+  for (const std::size_t first : edges.non_manifold)
+    for (std::size_t i = first + 1; i < slots.size() && slots[i].key == slots[first].key; ++i)
+      components.unite(slots[first].index / 3, slots[i].index / 3);
+  for_each_piece(static_cast<std::size_t>(nf), pieces, [&](std::size_t c, std::size_t begin,
+                                                           std::size_t end) {
+    int here = 0;  // counted here, stored once
+    for (std::size_t f = begin; f < end; ++f)
+      here += components.parent[f] == static_cast<int>(f) ? 1 : 0;
+    roots[c] = here;
+  });
+  return std::accumulate(roots.begin(), roots.end(), 0);
+}
+
 LoadedMesh repair(const std::string& path, RawMesh raw, std::string format,
                   const ReadOptions& options) {
   LoadedMesh out;
@@ -1143,44 +1186,9 @@ LoadedMesh repair(const std::string& path, RawMesh raw, std::string format,
   report.boundary_edges = edges.boundary;
   report.non_manifold_edges = static_cast<int>(edges.non_manifold.size());
   // Faces that run every manifold edge they share in opposite directions (most parts as read)
-  // are oriented consistently already: the search below would flip none of them. Their
-  // components then come from a union-find in pieces of faces, side by side (links within a
-  // piece), then over the links between pieces and the non-manifold edges.
+  // are oriented consistently already: the search below would flip none of them.
   if (!edges.same) {
-    UnionFind components(nf, UnionFind::Unset{});
-    const std::size_t pieces = piece_count(static_cast<std::size_t>(nf));
-    std::vector<std::vector<std::pair<int, int>>> across(pieces);  // face pairs, per piece
-    std::vector<int> roots(pieces, 0);
-    for_each_piece(static_cast<std::size_t>(nf), pieces, [&](std::size_t c, std::size_t begin,
-                                                             std::size_t end) {
-      std::vector<std::pair<int, int>> mine;  // moved in once: the lists' headers share lines
-      std::iota(components.parent.begin() + begin, components.parent.begin() + end,
-                static_cast<int>(begin));
-      for (std::size_t f = begin; f < end; ++f)
-        for (std::size_t k = 0; k < 3; ++k) {
-          const int to = link[3 * f + k];
-          const auto g = static_cast<std::size_t>(to / 2);
-          if (to < 0 || g < f) continue;  // each pair once, from its lower face
-          if (g < end)
-            components.unite(static_cast<int>(f), static_cast<int>(g));  // roots stay in the piece
-          else
-            mine.emplace_back(static_cast<int>(f), static_cast<int>(g));
-        }
-      across[c] = std::move(mine);
-    });
-    for (const auto& pairs : across)
-      for (const auto& [f, g] : pairs) components.unite(f, g);
-    for (const std::size_t first : edges.non_manifold)
-      for (std::size_t i = first + 1; i < slots.size() && slots[i].key == slots[first].key; ++i)
-        components.unite(slots[first].index / 3, slots[i].index / 3);
-    for_each_piece(static_cast<std::size_t>(nf), pieces, [&](std::size_t c, std::size_t begin,
-                                                             std::size_t end) {
-      int here = 0;  // counted here, stored once
-      for (std::size_t f = begin; f < end; ++f)
-        here += components.parent[f] == static_cast<int>(f) ? 1 : 0;
-      roots[c] = here;
-    });
-    report.components = std::accumulate(roots.begin(), roots.end(), 0);
+    report.components = options.count_components ? linked_components(nf, link, slots, edges) : -1;
     if (options.flip) mesh.F.col(1).swap(mesh.F.col(2));
     return out;
   }
@@ -1247,12 +1255,16 @@ LoadedMesh repair(const std::string& path, RawMesh raw, std::string format,
     }
   // Components join across every shared edge: the patches (joined across manifold edges) are
   // joined across the non-manifold ones too.
-  UnionFind components(patches);
-  for (const std::size_t first : edges.non_manifold)
-    for (std::size_t i = first + 1; i < slots.size() && slots[i].key == slots[first].key; ++i)
-      components.unite(patch[slots[first].index / 3], patch[slots[i].index / 3]);
-  for (int p = 0; p < patches; ++p)
-    if (components.find(p) == p) ++report.components;
+  if (options.count_components) {
+    UnionFind components(patches);
+    for (const std::size_t first : edges.non_manifold)
+      for (std::size_t i = first + 1; i < slots.size() && slots[i].key == slots[first].key; ++i)
+        components.unite(patch[slots[first].index / 3], patch[slots[i].index / 3]);
+    for (int p = 0; p < patches; ++p)
+      if (components.find(p) == p) ++report.components;
+  } else {
+    report.components = -1;
+  }
   if (options.flip) mesh.F.col(1).swap(mesh.F.col(2));
   return out;
 }

@@ -74,7 +74,9 @@ TEST_F(Cli, FitWritesEveryOutput) {
   // Nothing temporary is left behind.
   for (const auto& e : fs::directory_iterator(out)) EXPECT_EQ(e.path().filename().string().rfind(".tmp", 0), std::string::npos);
   // info and movability speak too.
-  EXPECT_EQ(run("info " + mesh.string()).code, 0);
+  const CliRun info = run("info " + mesh.string());
+  EXPECT_EQ(info.code, 0);
+  EXPECT_NE(info.out.find("components      1\n"), std::string::npos) << info.out;  // counted
   const CliRun m = run("movability " + mesh.string() + " " + kLine);
   EXPECT_EQ(m.code, 0);
   EXPECT_NE(m.out.find("movability"), std::string::npos);

@@ -541,7 +541,8 @@ TEST_F(ReadMesh, BinaryTrianglePlyReadsAsItsAsciiTwin) {
 // 200 × 100 grid of squares, shuffled, cut by removed columns into bands, an island cut out
 // by a removed ring, and fins on interior edges (each a non-manifold edge: a fin is its
 // band's); the count is a breadth-first search's over shared edges, at one thread and two,
-// and the same with one face reversed (the orientation's own search counts it then).
+// and the same with one face reversed (the orientation's own search counts it then). Not
+// asked to count (as the solver reads), the read gives −1 and the same mesh and report.
 TEST_F(ReadMesh, ComponentsAreCountedInPiecesWhenOrientedAsRead) {
   constexpr int nx = 200, ny = 100;
   const auto id = [](int i, int j) { return j * (nx + 1) + i; };
@@ -610,6 +611,16 @@ TEST_F(ReadMesh, ComponentsAreCountedInPiecesWhenOrientedAsRead) {
       EXPECT_EQ(m.report.non_manifold_edges, 20);
       EXPECT_EQ(m.report.flipped_faces, reversed_one ? 1 : 0);
       EXPECT_TRUE(m.report.orientable);
+      ReadOptions uncounted;
+      uncounted.count_components = false;
+      const LoadedMesh u = repair_triangles("grid", xyz, triangles, "soup", uncounted);
+      EXPECT_EQ(u.report.components, -1);
+      EXPECT_TRUE(u.mesh.V == m.mesh.V && u.mesh.F == m.mesh.F);
+      const MeshReport &got = u.report, &counted = m.report;
+      EXPECT_EQ(
+          std::tie(got.flipped_faces, got.boundary_edges, got.non_manifold_edges, got.orientable),
+          std::tie(counted.flipped_faces, counted.boundary_edges, counted.non_manifold_edges,
+                   counted.orientable));
     }
   }
 }
