@@ -189,7 +189,7 @@ Tally<Word> count_covering(const std::vector<Patch>& pool, const VecX& area,
 
 template <class Word>
 void order_on(Crew& crew, const std::vector<Patch>& pool, const VecX& area, double total, std::vector<int> picks,
-              Cover* c, Tally<Word> count = {});
+              Cover* c, const Tally<Word>& count = {});
 
 // improve_cover's swaps of `picks` (pool indices, the cover's picks), with `crew` for the
 // sums. Returns the Tally of the picks it leaves.
@@ -283,7 +283,7 @@ void improve_with(Crew& crew, const std::vector<Patch>& pool, const VecX& area, 
   Tally<Word> count;
   if (picks.size() < pool.size())
     count = swap_picks<Word>(crew, pool, area, max_swaps, c->total_area, picks);
-  order_on<Word>(crew, pool, area, c->total_area, picks, c, std::move(count));
+  order_on<Word>(crew, pool, area, c->total_area, picks, c, count);
 }
 
 void improve_on(Crew& crew, const std::vector<Patch>& pool, const VecX& area, int max_swaps, Cover* c) {
@@ -439,10 +439,11 @@ std::vector<int> elimination_order(const std::vector<Patch>& pool, const VecX& a
 namespace {
 // order_cover's cover of `picks`, made in `c` (its storage reused: on a part of 129,000
 // vertices a fresh cover's first touch of its pages cost more than the sums); `count` is
-// count_covering of `picks` where the swaps left it, or empty; `total` is area.sum().
+// count_covering of `picks` where the swaps left it (read only), or empty; `total` is
+// area.sum().
 template <class Word>
 void order_on(Crew& crew, const std::vector<Patch>& pool, const VecX& area, double total, std::vector<int> picks,
-              Cover* c, Tally<Word> count) {
+              Cover* c, const Tally<Word>& count) {
   std::sort(picks.begin(), picks.end());
   // One pick has one order. A cover of that pick alone is that order's cover already: greedy
   // and cover_in_order mark its vertices and sum its blocks the same way, from the same empty
