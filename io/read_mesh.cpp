@@ -893,11 +893,13 @@ Sum sum_over_runs(Item* sorted, std::size_t n, const Run& run) {
 struct EdgeRuns {
   int boundary = 0;
   std::vector<std::size_t> non_manifold;
-  bool same = false;  // some manifold edge is run the same way by its two faces
+  bool same = false;    // some manifold edge is run the same way by its two faces
+  bool copies = false;  // two faces of some edge share their third vertex: the same corners
   EdgeRuns& operator+=(const EdgeRuns& o) {
     boundary += o.boundary;
     non_manifold.insert(non_manifold.end(), o.non_manifold.begin(), o.non_manifold.end());
     same = same || o.same;
+    copies = copies || o.copies;
     return *this;
   }
 };
@@ -1010,6 +1012,44 @@ int linked_components(int nf, const Buffer<int>& link, const Buffer<KeyedIndex>&
   return std::accumulate(roots.begin(), roots.end(), 0);
 }
 
+// The edges' sorted slots into `slots`, per slot the face across a manifold edge into `link`
+// (times two, plus one where both faces run the edge the same way; −1 elsewhere), and the
+// runs' counts (see repair).
+EdgeRuns link_edges(const Mesh& mesh, Buffer<KeyedIndex>& slots, Buffer<int>& link) {
+  slots = sorted_edge_slots(mesh);
+  link = Buffer<int>(slots.size());
+  parallel_for(0, slots.size(), [&](std::size_t begin, std::size_t end) {
+    std::fill(link.data() + begin, link.data() + end, -1);
+  }, 3 * kPiece);
+  // The slot's edge runs from the smaller to the larger index; the vertex off the slot's edge.
+  const auto forward = [&](int slot) {
+    const int f = slot / 3, k = slot % 3;
+    return mesh.F(f, k) < mesh.F(f, (k + 1) % 3);
+  };
+  const auto third = [&](int slot) { return mesh.F(slot / 3, (slot % 3 + 2) % 3); };
+  const auto edge_run = [&](const KeyedIndex* first, const KeyedIndex* last) {
+    EdgeRuns runs;
+    if (last - first == 1) runs.boundary = 1;
+    if (last - first > 2) {
+      runs.non_manifold.push_back(static_cast<std::size_t>(first - slots.data()));
+      std::vector<int> thirds;
+      for (const KeyedIndex* k = first; k < last; ++k) thirds.push_back(third(k->index));
+      std::ranges::sort(thirds);
+      runs.copies = std::ranges::adjacent_find(thirds) != thirds.end();
+    }
+    if (last - first == 2) {
+      const int a = first->index, b = (first + 1)->index;
+      const int same = forward(a) == forward(b) ? 1 : 0;
+      link[static_cast<std::size_t>(a)] = 2 * (b / 3) + same;
+      link[static_cast<std::size_t>(b)] = 2 * (a / 3) + same;
+      runs.same = same == 1;
+      runs.copies = third(a) == third(b);
+    }
+    return runs;
+  };
+  return sum_over_runs<EdgeRuns>(slots.data(), slots.size(), edge_run);
+}
+
 LoadedMesh repair(const std::string& path, RawMesh raw, std::string format,
                   const ReadOptions& options) {
   LoadedMesh out;
@@ -1115,8 +1155,9 @@ LoadedMesh repair(const std::string& path, RawMesh raw, std::string format,
     for (std::size_t t = begin; t < end; ++t)
       if (!degenerate[t]) next = std::ranges::copy(welded(static_cast<int>(t)), next).out;
   });
-  report.duplicate_faces = drop_duplicate_faces(kept);
-  const int nf = kept_before.back() - report.duplicate_faces;  // in front of `kept`
+  // Faces on the same three vertices as an earlier one are dropped below, once the edges'
+  // runs have shown there are some: they use the vertices their first copy uses.
+  int nf = kept_before.back();
 
   // Remove unused vertices, keeping the file's order.
   std::vector<char> used(static_cast<std::size_t>(nv), 0);
@@ -1157,32 +1198,21 @@ LoadedMesh repair(const std::string& path, RawMesh raw, std::string format,
   // of two) links its faces and carries the orientation constraint: `same` means both faces
   // run the edge in the same direction, i.e. one of them must be flipped. A face lists its
   // neighbours in the order of their edges' keys: the order the search below visits them in.
-  const Buffer<KeyedIndex> slots = sorted_edge_slots(mesh);
-  const auto forward = [&](int slot) {  // the slot's edge runs from the smaller to the larger index
-    const int f = slot / 3, k = slot % 3;
-    return mesh.F(f, k) < mesh.F(f, (k + 1) % 3);
-  };
+  Buffer<KeyedIndex> slots;
   // Per slot, the face across its edge times two, plus one where `same`; -1 where the edge is
   // not manifold.
-  Buffer<int> link(slots.size());
-  parallel_for(0, slots.size(), [&](std::size_t begin, std::size_t end) {
-    std::fill(link.data() + begin, link.data() + end, -1);
-  }, 3 * kPiece);
-  const auto edge_run = [&](const KeyedIndex* first, const KeyedIndex* last) {
-    EdgeRuns runs;
-    if (last - first == 1) runs.boundary = 1;
-    if (last - first > 2)
-      runs.non_manifold.push_back(static_cast<std::size_t>(first - slots.data()));
-    if (last - first == 2) {
-      const int a = first->index, b = (first + 1)->index;
-      const int same = forward(a) == forward(b) ? 1 : 0;
-      link[static_cast<std::size_t>(a)] = 2 * (b / 3) + same;
-      link[static_cast<std::size_t>(b)] = 2 * (a / 3) + same;
-      runs.same = same == 1;
-    }
-    return runs;
-  };
-  const EdgeRuns edges = sum_over_runs<EdgeRuns>(slots.data(), slots.size(), edge_run);
+  Buffer<int> link;
+  EdgeRuns edges = link_edges(mesh, slots, link);
+  if (edges.copies) {
+    // A face on the same corners as another shares all three edges with it, and its third
+    // vertex on each: the runs see every such pair. Rare, so found exactly, and the edges
+    // found again, only then. Dropping copies keeps the vertices used.
+    const std::span<int> corners(mesh.F.data(), 3 * static_cast<std::size_t>(nf));
+    report.duplicate_faces = drop_duplicate_faces(corners);
+    nf -= report.duplicate_faces;
+    mesh.F.conservativeResize(nf, 3);  // row-major: the faces kept are the first rows
+    edges = link_edges(mesh, slots, link);
+  }
   report.boundary_edges = edges.boundary;
   report.non_manifold_edges = static_cast<int>(edges.non_manifold.size());
   // Faces that run every manifold edge they share in opposite directions (most parts as read)

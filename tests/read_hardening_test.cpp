@@ -311,6 +311,40 @@ TEST_F(ReadHardening, DuplicatedPartReadsAsTheCleanPart) {
   EXPECT_EQ(double_cube.mesh.F, clean_cube.mesh.F);
 }
 
+// Copies are found from the edges' runs (a copy shares each edge, and the vertex off it, with
+// its first): on an edge of two faces, at a boundary, and on a fin's edge of three faces or
+// more. Faces that share an edge and differ in their third vertex are not copies, nor are a
+// fin's faces on one edge.
+TEST_F(ReadHardening, CopiesAreFoundOnEveryKindOfEdge) {
+  // Two triangles of a square, a fin standing on their diagonal (1-3), a flap on edge 1-2.
+  const std::string points = "v 0 0 0\nv 1 0 0\nv 1 1 0\nv 0 1 0\nv 0.5 0.5 1\nv 1 0.5 -1\n";
+  const std::string faces = "f 1 2 3\nf 1 3 4\nf 1 3 5\nf 2 6 3\n";
+  const LoadedMesh clean = read_mesh_bytes("clean.obj", points + faces);
+  ASSERT_EQ(clean.mesh.face_count(), 4);
+  EXPECT_EQ(clean.report.duplicate_faces, 0);
+  EXPECT_EQ(clean.report.non_manifold_edges, 1);
+  for (const std::string& copy : {"f 3 2 1\n", "f 4 1 3\n", "f 5 3 1\n", "f 3 6 2\n"}) {
+    SCOPED_TRACE(copy);
+    for (const std::string& file : {points + faces + copy, points + copy + faces}) {
+      const LoadedMesh read = read_mesh_bytes("copy.obj", file);
+      EXPECT_EQ(read.report.duplicate_faces, 1);
+      EXPECT_EQ(read.report.input_faces, 5);
+      EXPECT_EQ(read.mesh.V, clean.mesh.V);
+      EXPECT_EQ(read.report.non_manifold_edges, clean.report.non_manifold_edges);
+      EXPECT_EQ(read.report.boundary_edges, clean.report.boundary_edges);
+    }
+    EXPECT_EQ(read_mesh_bytes("copy.obj", points + faces + copy).mesh.F, clean.mesh.F);
+  }
+  // The fin three times: its copies' every edge has three faces or more.
+  const LoadedMesh fins = read_mesh_bytes("fins.obj", points + faces + "f 3 5 1\nf 1 5 3\n");
+  EXPECT_EQ(fins.report.duplicate_faces, 2);
+  EXPECT_EQ(fins.mesh.F, clean.mesh.F);
+  // Every face twice, one of them a third time.
+  const LoadedMesh thrice = read_mesh_bytes("thrice.obj", points + faces + faces + "f 3 5 1\n");
+  EXPECT_EQ(thrice.report.duplicate_faces, 5);
+  EXPECT_EQ(thrice.mesh.F, clean.mesh.F);
+}
+
 // A regular polygon of n vertices as an OBJ face (or, when `ply`, a binary PLY face).
 std::string polygon_file(int n, bool ply) {
   std::string s = ply ? "ply\nformat binary_little_endian 1.0\nelement vertex " + std::to_string(n) +
