@@ -1017,10 +1017,7 @@ int linked_components(int nf, const Buffer<int>& link, const Buffer<KeyedIndex>&
 // runs' counts (see repair).
 EdgeRuns link_edges(const Mesh& mesh, Buffer<KeyedIndex>& slots, Buffer<int>& link) {
   slots = sorted_edge_slots(mesh);
-  link = Buffer<int>(slots.size());
-  parallel_for(0, slots.size(), [&](std::size_t begin, std::size_t end) {
-    std::fill(link.data() + begin, link.data() + end, -1);
-  }, 3 * kPiece);
+  link = Buffer<int>(slots.size());  // every slot is in one run, which sets its link
   // The slot's edge runs from the smaller to the larger index; the vertex off the slot's edge.
   const auto forward = [&](int slot) {
     const int f = slot / 3, k = slot % 3;
@@ -1029,6 +1026,9 @@ EdgeRuns link_edges(const Mesh& mesh, Buffer<KeyedIndex>& slots, Buffer<int>& li
   const auto third = [&](int slot) { return mesh.F(slot / 3, (slot % 3 + 2) % 3); };
   const auto edge_run = [&](const KeyedIndex* first, const KeyedIndex* last) {
     EdgeRuns runs;
+    if (last - first != 2)
+      for (const KeyedIndex* k = first; k < last; ++k)
+        link[static_cast<std::size_t>(k->index)] = -1;
     if (last - first == 1) runs.boundary = 1;
     if (last - first > 2) {
       runs.non_manifold.push_back(static_cast<std::size_t>(first - slots.data()));
