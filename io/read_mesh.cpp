@@ -1064,18 +1064,21 @@ LoadedMesh repair(const std::string& path, RawMesh raw, std::string format,
 
   // Weld exact duplicates onto the first occurrence, so a clean file keeps its numbering.
   const auto coord = [&](int v) { return raw.xyz.data() + 3 * static_cast<std::size_t>(v); };
-  // Points sorted by their weld hash, then by index: the copies of a point are adjacent, its
-  // first occurrence first. Where unequal points share a hash, their run is sorted by
-  // coordinates, then index.
+  // Points sorted by their weld hash's top bits, then by index: the copies of a point are
+  // adjacent, its first occurrence first. Where unequal points share those bits, their run is
+  // sorted by coordinates, then index. Under 2^18 points, 22 bits: two radix passes, which end
+  // in place (32 bits are three and a copy back), with few such runs (some n² / 2²³ pairs of
+  // n points). From 2^18 points the runs' sorts cost more than the pass saves: all 32 bits.
+  const int weld_bits = nv < (1 << 18) ? 22 : 32;
   Buffer<KeyedIndex> order(static_cast<std::size_t>(nv));
   parallel_for(0, static_cast<std::size_t>(nv), [&](std::size_t begin, std::size_t end) {
     for (std::size_t v = begin; v < end; ++v) {
       double* p = coord(static_cast<int>(v));
       for (int k = 0; k < 3; ++k) p[k] += 0.0;  // −0 → +0: equal coordinates compare equal
-      order[v] = {weld_hash(p), static_cast<std::int32_t>(v)};
+      order[v] = {weld_hash(p) >> (32 - weld_bits), static_cast<std::int32_t>(v)};
     }
   }, kPiece);
-  radix_sort_by_key(order, 32);
+  radix_sort_by_key(order, weld_bits);
   Buffer<int> representative(static_cast<std::size_t>(nv));  // every point's set by its run
   const auto same_point = [&](int a, int b) {
     return std::equal(coord(a), coord(a) + 3, coord(b));
