@@ -411,6 +411,62 @@ TEST_F(ReadMesh, WeldKeepsFirstOccurrencesWhereHashesCollide) {
   }
 }
 
+// The weld sorts points by 22 bits of their hash under 2^18 points and by all 32 from there
+// (where unequal points sharing 22 bits would be many): on both sides of that switch a soup
+// of a grid's triangles, shuffled, welds to the grid's points in order of first appearance,
+// at one thread and at two.
+TEST_F(ReadMesh, WeldKeepsFirstOccurrencesOnBothSidesOfItsKeyWidth) {
+  for (const int n : {150, 300}) {  // 135,000 and 540,000 points
+    SCOPED_TRACE(n);
+    std::vector<std::array<int, 3>> soup;
+    const auto id = [&](int i, int j) { return j * (n + 1) + i; };
+    for (int j = 0; j < n; ++j)
+      for (int i = 0; i < n; ++i) {
+        const int a = id(i, j), b = id(i + 1, j), c = id(i + 1, j + 1), d = id(i, j + 1);
+        soup.insert(soup.end(), {{a, b, c}, {a, c, d}});
+      }
+    std::mt19937 rng(static_cast<unsigned>(n));
+    std::shuffle(soup.begin(), soup.end(), rng);
+    std::vector<double> xyz;
+    std::vector<int> triangles;
+    std::vector<int> first(static_cast<std::size_t>((n + 1) * (n + 1)), -1);
+    std::vector<int> want;  // grid points in order of first appearance
+    for (const auto& t : soup)
+      for (const int v : t) {
+        triangles.push_back(static_cast<int>(xyz.size() / 3));
+        xyz.insert(xyz.end(), {0.25 * (v % (n + 1)), 0.5 * (v / (n + 1)), 0.0});
+        if (first[static_cast<std::size_t>(v)] < 0) {
+          first[static_cast<std::size_t>(v)] = static_cast<int>(want.size());
+          want.push_back(v);
+        }
+      }
+    ASSERT_EQ(xyz.size() / 3 < (std::size_t{1} << 18), n == 150);
+    for (const int threads : {1, 2}) {
+      const ThreadLimit limit(threads);
+      const LoadedMesh m = repair_triangles("soup", xyz, triangles, "soup", {});
+      ASSERT_EQ(m.mesh.vertex_count(), (n + 1) * (n + 1));
+      EXPECT_EQ(m.report.welded_vertices, static_cast<int>(triangles.size()) - (n + 1) * (n + 1));
+      int wrong = 0;
+      for (int v = 0; v < m.mesh.vertex_count(); ++v) {
+        const int g = want[static_cast<std::size_t>(v)];
+        const bool here =
+            m.mesh.V(v, 0) == 0.25 * (g % (n + 1)) && m.mesh.V(v, 1) == 0.5 * (g / (n + 1));
+        wrong += here ? 0 : 1;
+      }
+      EXPECT_EQ(wrong, 0);
+      ASSERT_EQ(m.mesh.face_count(), 2 * n * n);
+      for (int f = 0; f < m.mesh.face_count(); ++f) {  // each face on its own corners, in order
+        const auto& t = soup[static_cast<std::size_t>(f)];
+        for (int k = 0; k < 3; ++k) {
+          const int corner = t[static_cast<std::size_t>(k)];
+          wrong += m.mesh.F(f, k) == first[static_cast<std::size_t>(corner)] ? 0 : 1;
+        }
+      }
+      EXPECT_EQ(wrong, 0);
+    }
+  }
+}
+
 // A binary PLY of triangles, with other values in its rows and another element, is read row by
 // row in place (the rows have fixed sizes); it must read exactly as its ASCII twin, which the
 // general reader reads, for each value type. A quad, an index out of range, a negative index
