@@ -1078,7 +1078,29 @@ LoadedMesh repair(const std::string& path, RawMesh raw, std::string format,
       order[v] = {weld_hash(p) >> (32 - weld_bits), static_cast<std::int32_t>(v)};
     }
   }, kPiece);
-  radix_sort_by_key(order, weld_bits);
+  // The box of the points the triangles use, beside the sort (which runs on one thread under
+  // 32,768 points); min and max are exact, so pieces' boxes make the same.
+  const auto point = [&](int v) { return Vec3(coord(v)[0], coord(v)[1], coord(v)[2]); };
+  Vec3 lo, hi;
+  const auto find_box = [&] {
+    const std::size_t corner_pieces = piece_count(raw.triangles.size());
+    constexpr double kInfinity = std::numeric_limits<double>::infinity();
+    std::vector<Vec3> piece_lo(corner_pieces, Vec3::Constant(kInfinity));
+    std::vector<Vec3> piece_hi(corner_pieces, -piece_lo[0]);
+    for_each_piece(raw.triangles.size(), corner_pieces, [&](std::size_t c, std::size_t begin,
+                                                            std::size_t end) {
+      Vec3 piece_min = piece_lo[c], piece_max = piece_hi[c];
+      for (std::size_t i = begin; i < end; ++i) {
+        const Vec3 p = point(raw.triangles[i]);
+        piece_min = piece_min.cwiseMin(p), piece_max = piece_max.cwiseMax(p);
+      }
+      piece_lo[c] = piece_min, piece_hi[c] = piece_max;
+    });
+    lo = piece_lo[0], hi = piece_hi[0];
+    for (std::size_t c = 1; c < corner_pieces; ++c)
+      lo = lo.cwiseMin(piece_lo[c]), hi = hi.cwiseMax(piece_hi[c]);
+  };
+  run_beside(find_box, [&] { radix_sort_by_key(order, weld_bits); });
   Buffer<int> representative(static_cast<std::size_t>(nv));  // every point's set by its run
   const auto same_point = [&](int a, int b) {
     return std::equal(coord(a), coord(a) + 3, coord(b));
@@ -1107,23 +1129,8 @@ LoadedMesh repair(const std::string& path, RawMesh raw, std::string format,
   const int unique = sum_over_runs<int>(order.data(), order.size(), run);
   report.welded_vertices = nv - unique;
 
-  // Drop degenerate faces: repeated (welded) index or area ≤ 1e-14 · diagonal². The box is
-  // of the points the triangles use; min and max are exact, so pieces' boxes make the same.
-  const auto point = [&](int v) { return Vec3(coord(v)[0], coord(v)[1], coord(v)[2]); };
-  const std::size_t corner_pieces = piece_count(raw.triangles.size());
-  constexpr double kInfinity = std::numeric_limits<double>::infinity();
-  std::vector<Vec3> piece_lo(corner_pieces, Vec3::Constant(kInfinity));
-  std::vector<Vec3> piece_hi(corner_pieces, -piece_lo[0]);
-  for_each_piece(raw.triangles.size(), corner_pieces, [&](std::size_t c, std::size_t begin,
-                                                          std::size_t end) {
-    Vec3 lo = piece_lo[c], hi = piece_hi[c];
-    for (std::size_t i = begin; i < end; ++i)
-      lo = lo.cwiseMin(point(raw.triangles[i])), hi = hi.cwiseMax(point(raw.triangles[i]));
-    piece_lo[c] = lo, piece_hi[c] = hi;
-  });
-  Vec3 lo = piece_lo[0], hi = piece_hi[0];
-  for (std::size_t c = 1; c < corner_pieces; ++c)
-    lo = lo.cwiseMin(piece_lo[c]), hi = hi.cwiseMax(piece_hi[c]);
+  // Drop degenerate faces: repeated (welded) index or area ≤ 1e-14 · diagonal² (the box of
+  // the points the triangles use, found beside the weld's sort above).
   const double area_floor = kDegenerateArea * (hi - lo).squaredNorm();
   const auto welded = [&](int t) {
     const int* corner = raw.triangles.data() + 3 * static_cast<std::size_t>(t);
