@@ -1137,20 +1137,28 @@ LoadedMesh repair(const std::string& path, RawMesh raw, std::string format,
     return std::array<int, 3>{representative[corner[0]], representative[corner[1]],
                               representative[corner[2]]};
   };
-  Buffer<char> degenerate(static_cast<std::size_t>(nt));
+  // Each piece writes its kept faces' welded corners from where its first face's would go,
+  // in order; where faces were dropped, the pieces' runs are then moved up to close the gaps
+  // (most files drop none: one pass over the faces, not two).
   const std::size_t face_pieces = piece_count(static_cast<std::size_t>(nt));
   std::vector<int> kept_before(face_pieces + 1, 0);  // kept faces before piece c, once summed
+  std::vector<std::size_t> piece_begin(face_pieces, 0);
+  Buffer<int> kept(3 * static_cast<std::size_t>(nt));
   for_each_piece(static_cast<std::size_t>(nt), face_pieces, [&](std::size_t c, std::size_t begin,
                                                                 std::size_t end) {
     int kept_here = 0;  // counted here, stored once: the pieces' counts share cache lines
+    int* next = kept.data() + 3 * begin;
     for (std::size_t t = begin; t < end; ++t) {
       const auto [a, b, c3] = welded(static_cast<int>(t));
       bool bad = a == b || b == c3 || a == c3;
       if (!bad)
         bad = 0.5 * (point(b) - point(a)).cross(point(c3) - point(a)).norm() <= area_floor;
-      degenerate[t] = bad ? 1 : 0;
-      kept_here += bad ? 0 : 1;
+      if (bad) continue;
+      next[0] = a, next[1] = b, next[2] = c3;
+      next += 3;
+      ++kept_here;
     }
+    piece_begin[c] = begin;
     kept_before[c + 1] = kept_here;
   });
   std::partial_sum(kept_before.begin(), kept_before.end(), kept_before.begin());
@@ -1158,13 +1166,11 @@ LoadedMesh repair(const std::string& path, RawMesh raw, std::string format,
   if (kept_before.back() == 0)
     fail(path, nt == 1 ? std::string("the only triangle is degenerate")
                        : "all " + std::to_string(nt) + " triangles are degenerate");
-  Buffer<int> kept(3 * static_cast<std::size_t>(kept_before.back()));
-  for_each_piece(static_cast<std::size_t>(nt), face_pieces, [&](std::size_t c, std::size_t begin,
-                                                                std::size_t end) {
-    auto next = kept.begin() + 3 * static_cast<std::ptrdiff_t>(kept_before[c]);
-    for (std::size_t t = begin; t < end; ++t)
-      if (!degenerate[t]) next = std::ranges::copy(welded(static_cast<int>(t)), next).out;
-  });
+  if (report.degenerate_faces > 0)  // each run moves up, never past a later one's start
+    for (std::size_t c = 1; c < face_pieces; ++c)
+      std::memmove(kept.data() + 3 * static_cast<std::size_t>(kept_before[c]),
+                   kept.data() + 3 * piece_begin[c],
+                   3 * sizeof(int) * static_cast<std::size_t>(kept_before[c + 1] - kept_before[c]));
   // Faces on the same three vertices as an earlier one are dropped below, once the edges'
   // runs have shown there are some: they use the vertices their first copy uses.
   int nf = kept_before.back();
