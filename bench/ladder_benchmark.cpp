@@ -515,6 +515,15 @@ void bench_command(benchmark::State& state, Rung r, int threads) {
   state.counters["tolerance_rel"] = p.decompose_tolerance;
 }
 
+// A ladder benchmark; at two threads, with the cache line's round trip between the cores
+// measured just before it (counter line_rt_ns, bench::line_round_trip_ns).
+void probed(benchmark::State& state, void (*fn)(benchmark::State&, Rung, int), Rung r,
+            int threads) {
+  const double round_trip = threads == 2 ? bench::line_round_trip_ns() : 0.0;
+  fn(state, r, threads);
+  if (threads == 2) state.counters["line_rt_ns"] = round_trip;
+}
+
 }  // namespace
 
 void register_ladder_benchmarks() {
@@ -556,7 +565,7 @@ void register_ladder_benchmarks() {
         if (std::string_view(stage) == "command" && r.triangles > kCommandMaxTriangles) continue;
         // No MinTime or Iterations here: they would become part of the name. The script passes
         // --benchmark_min_time; decompose runs once whenever it takes longer than that.
-        benchmark::RegisterBenchmark(bench_name(stage, r, threads).c_str(), fn, r, threads)
+        benchmark::RegisterBenchmark(bench_name(stage, r, threads).c_str(), probed, fn, r, threads)
             ->UseRealTime()
             ->Unit(std::string(stage) == "decompose" || std::string(stage) == "command" ? benchmark::kSecond
                                                                                        : benchmark::kMillisecond);
@@ -568,7 +577,8 @@ void register_ladder_benchmarks() {
   // here only where its file was not written before (over 64k triangles).
   for (const Rung& r : rungs)
     for (int threads : {1, 2})
-      benchmark::RegisterBenchmark(bench_name("read", r, threads).c_str(), bench_read, r, threads)
+      benchmark::RegisterBenchmark(bench_name("read", r, threads).c_str(), probed, bench_read, r,
+                                   threads)
           ->UseRealTime()
           ->Unit(benchmark::kMillisecond);
 }

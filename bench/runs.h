@@ -5,7 +5,9 @@
 #include <benchmark/benchmark.h>
 
 #include <algorithm>
+#include <atomic>
 #include <chrono>
+#include <thread>
 #include <vector>
 
 #include "kernels/cutter.h"
@@ -22,6 +24,39 @@ inline void spin_for(std::chrono::microseconds span) {
   const auto until = std::chrono::steady_clock::now() + span;
   while (std::chrono::steady_clock::now() < until) {
   }
+}
+
+// How long a cache line takes to pass from this core to another and back, in nanoseconds:
+// one thread of its own and this one hand a word to each other `trips` times; the median of
+// five such batches. On the 2-core virtual machines here it was 128-132 ns in quiet hours and
+// 440-490 ns in the spells when every two-thread stage that shares data between its threads
+// ran up to twice as long, while work on each core's own data ran as fast as ever (issue 13,
+// fifty-first part). The scaling report records it beside every two-thread ladder run, so
+// that a pair run in such a spell can be told from the code's own scaling.
+inline double line_round_trip_ns(int trips = 2000) {
+  alignas(64) std::atomic<int> word{0};
+  std::vector<double> batches;
+  for (int batch = 0; batch < 5; ++batch) {
+    word.store(0);
+    std::thread other([&] {
+      for (int i = 0; i < trips; ++i) {
+        while (word.load(std::memory_order_acquire) != 2 * i + 1) {
+        }
+        word.store(2 * i + 2, std::memory_order_release);
+      }
+    });
+    const auto start = std::chrono::steady_clock::now();
+    for (int i = 0; i < trips; ++i) {
+      word.store(2 * i + 1, std::memory_order_release);
+      while (word.load(std::memory_order_acquire) != 2 * i + 2) {
+      }
+    }
+    const auto end = std::chrono::steady_clock::now();
+    other.join();
+    batches.push_back(std::chrono::duration<double, std::nano>(end - start).count() / trips);
+  }
+  std::nth_element(batches.begin(), batches.begin() + 2, batches.end());
+  return batches[2];
 }
 
 // decompose on `mesh` (its BVH built inside the timing) at tolerance_rel × diagonal.

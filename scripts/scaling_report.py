@@ -67,6 +67,11 @@ EFFICIENCY_SUB_STAGES = [
     ("finish_s", "finish"),
     ("cover_s", "cover"),
 ]
+# bench/runs.h's line_round_trip_ns, recorded beside every two-thread ladder run: a pair whose
+# two-thread run saw a round trip over QUIET_FACTOR times the run's quiet level (its tenth
+# percentile) ran in one of the spells when data passes between the cores slowly.
+LINE_ROUND_TRIP = "line_rt_ns"
+QUIET_FACTOR = 2.0
 # A sub-stage shorter than this at one thread is left out of the table: its time is a sum of
 # pieces of microseconds over the rounds, below what a timer and a fork can resolve.
 MIN_SUB_STAGE_S = 1e-3
@@ -183,10 +188,10 @@ def _reals_by_repetition(runs):
 
 
 def _counters_by_repetition(runs):
-    """{counter: {repetition index: value}} for the EFFICIENCY_SUB_STAGES counters that every
-    iteration entry has (_by_repetition)."""
+    """{counter: {repetition index: value}} for the EFFICIENCY_SUB_STAGES counters and the
+    cache line's round trip that every iteration entry has (_by_repetition)."""
     out = {}
-    for name, _ in EFFICIENCY_SUB_STAGES:
+    for name in [n for n, _ in EFFICIENCY_SUB_STAGES] + [LINE_ROUND_TRIP]:
         values = _by_repetition(runs, lambda r: _counters(r).get(name))
         if values:
             out[name] = values
@@ -401,16 +406,27 @@ def paired(t1s, t2s, formula):
     return (statistics.median(values), len(values)) if values else (None, 0)
 
 
+def quiet_level(benches):
+    """The run's quiet cache-line round trip in ns: the tenth percentile of every two-thread
+    run's line_rt_ns over the repetitions; None where no run has one."""
+    trips = sorted(v for b in benches.values()
+                   for v in b.counter_reps.get(LINE_ROUND_TRIP, {}).values() if v > 0)
+    return trips[len(trips) // 10] if trips else None
+
+
 def parallel_rows(benches):
     """Speed-up and efficiency for every key with threads:1 and threads:2 runs: the median of
     the per-repetition ratios where both have two or more repetitions, else the ratio of the
     medians ("pairs" 0); "low" and "high" are the lowest and highest efficiency of one pair
     (None without pairs): the machine's noise on that row; "ceiling" is what one fork and
     join's cost (fork_join_cost) leaves a stage of that length at best, None without
-    BM_ForkJoin in the run. After each decompose row come its own stages' rows
-    (sub_stage_rows)."""
+    BM_ForkJoin in the run; "quiet" and "quiet_pairs" are the median efficiency over the pairs
+    whose two-thread run saw the cache line's round trip within QUIET_FACTOR of the run's quiet
+    level (quiet_level), and how many (None and 0 without round trips). After each decompose row
+    come its own stages' rows (sub_stage_rows)."""
     rows = []
     cost = fork_join_cost(benches)
+    level = quiet_level(benches)
     for key in ordered_keys(benches):
         b1 = benches[key]
         if not key.endswith("/threads:1"):
@@ -419,10 +435,23 @@ def parallel_rows(benches):
         b2 = benches.get(base + "/threads:2")
         if b2 is None:
             continue
+        first = len(rows)
         rows.append(_parallel_row(base, b1, b1.real_s, b2.real_s, b1.reals, b2.reals, cost))
         if b1.stage == "decompose":
             rows += sub_stage_rows(base, b1, b2, cost)
+        for row in rows[first:]:
+            _add_quiet(row, b2.counter_reps.get(LINE_ROUND_TRIP, {}), level)
     return rows
+
+
+def _add_quiet(row, trips, level):
+    """row's "quiet" efficiency and "quiet_pairs" (parallel_rows) from its pairs' efficiencies
+    (row["pair_efficiency"]: {repetition: efficiency}) and the two-thread runs' round trips."""
+    quiet = [e for i, e in row["pair_efficiency"].items()
+             if level is not None and i in trips and trips[i] <= QUIET_FACTOR * level]
+    row["quiet"] = statistics.median(quiet) if quiet else None
+    row["quiet_high"] = max(quiet) if quiet else None
+    row["quiet_pairs"] = len(quiet)
 
 
 def _parallel_row(name, b1, t1, t2, t1s, t2s, cost):
@@ -436,6 +465,8 @@ def _parallel_row(name, b1, t1, t2, t1s, t2s, cost):
         row["pairs"] = pairs
     values = pair_values(t1s, t2s, parallel_efficiency)
     row["low"], row["high"] = (min(values), max(values)) if values else (None, None)
+    row["pair_efficiency"] = dict(zip(sorted(set(t1s) & set(t2s)), values)) if values else {}
+    row["quiet"], row["quiet_high"], row["quiet_pairs"] = None, None, 0
     return row
 
 
@@ -456,6 +487,15 @@ def sub_stage_rows(base, b1, b2, cost):
         row["stage"] = f"decompose: {label}"
         rows.append(row)
     return rows
+
+
+def below_in_every_quiet_pair(rows, target=0.9):
+    """The parallel_rows long enough to reach target (ceiling unknown or at least target; see
+    below_in_every_pair) that have quiet pairs (parallel_rows), every one of them under it."""
+    return [r["benchmark"] for r in rows
+            if r["quiet_pairs"] and r["quiet_high"] < target
+            and not r["benchmark"].startswith("BM_ForkJoin/")
+            and (r["ceiling"] is None or r["ceiling"] >= target)]
 
 
 def below_in_every_pair(rows, target=0.9):
@@ -875,14 +915,26 @@ def build_markdown(title, run_path, context, benches, base_path, base, lad):
             f"a stage under {human_time(MIN_SUB_STAGE_S)} at one thread is left out. Each sums "
             "the stage over the rounds, so it forks many times: the ceiling, one fork's, is "
             "only an upper bound for it.", ""]
+    level = quiet_level(benches)
+    if level is not None:
+        out += [f"Before each two-thread run the ladder times a cache line's round trip from one "
+                f"core to the other (`line_rt_ns`, bench/runs.h). Its quiet level in this run "
+                f"(the tenth percentile over every two-thread run) was {level:.0f} ns. In spells "
+                f"when it is two to four times that, stages whose threads share data run up to "
+                f"twice as long at two threads, while work on each core's own data does not slow "
+                f"down: the machine, not the code. The quiet column is the median efficiency "
+                f"over the pairs whose two-thread run saw at most {QUIET_FACTOR:g} × the quiet "
+                f"level, and how many of the pairs those were; the efficiency column counts every "
+                f"pair.", ""]
     rows = parallel_rows(benches)
     out.append(md_table(
         ["benchmark", "t (1 thread)", "t (2 threads)", "speed-up", "efficiency", "pairs' range",
-         "ceiling", "pairs"],
+         "ceiling", "pairs", "quiet"],
         [[f"`{r['benchmark']}`", human_time(r["t1_s"]), human_time(r["t2_s"]),
           sig3(r["speedup"]), sig3(r["efficiency"]),
           "n/a" if r["low"] is None else f"{sig3(r['low'])}–{sig3(r['high'])}",
-          sig3(r["ceiling"]), str(r["pairs"] or "medians")]
+          sig3(r["ceiling"]), str(r["pairs"] or "medians"),
+          "n/a" if r["quiet"] is None else f"{sig3(r['quiet'])} ({r['quiet_pairs']})"]
          for r in rows]))
     short, slow = below_in_every_pair(rows)
     out += ["", "Under 0.9 in every pair (the pairs' range is the machine's noise on a row: a "
@@ -890,6 +942,10 @@ def build_markdown(title, run_path, context, benches, base_path, base, lad):
     out += [f"- too short for this machine (ceiling under 0.9 too): "
             f"{', '.join(f'`{b}`' for b in short) or 'none'}",
             f"- long enough to reach it: {', '.join(f'`{b}`' for b in slow) or 'none'}"]
+    if level is not None:
+        quiet_slow = below_in_every_quiet_pair(rows)
+        out += [f"- long enough to reach it, under 0.9 in every quiet pair: "
+                f"{', '.join(f'`{b}`' for b in quiet_slow) or 'none'}"]
 
     out += ["", "### Fit time vs unavoidable query time", "",
             "unavoidable = gn_iterations × samples ÷ raw cold queries/s (same part, size and "

@@ -231,6 +231,51 @@ class ScalingReportTest(unittest.TestCase):
         names = [r["benchmark"] for r in sr.parallel_rows(benches)]
         self.assertEqual(names, [base, base + " · seeds", base + " · candidates"])
 
+    def test_quiet_pairs_leave_out_the_slow_spells(self):
+        # Four repetitions of a decompose rung. The two-thread runs of repetitions 2 and 3 saw
+        # the cache line's round trip at 450-460 ns, against 130-140 in the others: their pairs
+        # (efficiency 0.5) count in the efficiency column, not in the quiet one. The one-thread
+        # runs carry no round trip. The cover stage misses in every quiet pair (0.6 and 0.7).
+        key = "Ladder/decompose/hecc_a/tri_k:24/threads:"
+        entries = []
+        for rep, (trip, eff, cover_eff) in enumerate(((130.0, 0.95, 0.6), (140.0, 0.93, 0.7),
+                                                      (450.0, 0.5, 0.9), (460.0, 0.5, 0.95))):
+            for t in (1, 2):
+                real = 2.0 if t == 1 else 1.0 / eff
+                c = {"cover_s": 0.002 if t == 1 else 0.001 / cover_eff, "grown": 40.0}
+                if t == 2:
+                    c["line_rt_ns"] = trip
+                entries.append({"name": f"{key}{t}/real_time", "run_name": f"{key}{t}/real_time",
+                                "run_type": "iteration", "repetitions": 4, "repetition_index": rep,
+                                "iterations": 1, "real_time": real, "cpu_time": real,
+                                "time_unit": "s", **c})
+        _, benches = sr.load_run(self.write("quiet.json", {"context": {}, "benchmarks": entries}))
+        self.assertEqual(sr.quiet_level(benches), 130.0)  # the tenth percentile of four: the least
+        par = {r["benchmark"]: r for r in sr.parallel_rows(benches)}
+        base = "Ladder/decompose/hecc_a/tri_k:24"
+        self.assertAlmostEqual(par[base]["efficiency"], (0.93 + 0.5) / 2)
+        self.assertEqual(par[base]["quiet_pairs"], 2)
+        self.assertAlmostEqual(par[base]["quiet"], 0.94)
+        self.assertAlmostEqual(par[base + " · cover"]["quiet"], 0.65)
+        self.assertAlmostEqual(par[base + " · cover"]["quiet_high"], 0.7)
+        rows = list(par.values())
+        self.assertEqual(sr.below_in_every_quiet_pair(rows), [base + " · cover"])
+        self.assertEqual(sr.below_in_every_pair(rows), ([], []))  # its slow-spell pairs reach 0.9
+        md = sr.build_markdown("t", "run.json", {}, benches, None, None, sr.ladder(benches))
+        self.assertIn("quiet level in this run (the tenth percentile over every two-thread run) "
+                      "was 130 ns", md)
+        self.assertIn("| 0.940 (2) |", md)
+        self.assertIn(f"under 0.9 in every quiet pair: `{base} · cover`", md)
+        # Without round trips (an older run) there is no quiet column to fill.
+        for e in entries:
+            e.pop("line_rt_ns", None)
+        _, benches = sr.load_run(self.write("loud.json", {"context": {}, "benchmarks": entries}))
+        self.assertIsNone(sr.quiet_level(benches))
+        row = sr.parallel_rows(benches)[0]
+        self.assertEqual((row["quiet"], row["quiet_pairs"]), (None, 0))
+        md = sr.build_markdown("t", "run.json", {}, benches, None, None, sr.ladder(benches))
+        self.assertNotIn("quiet level", md)
+
     def test_a_row_misses_only_when_every_pair_does(self):
         def row(name, low, high, ceiling):
             return {"benchmark": name, "low": low, "high": high, "ceiling": ceiling}
