@@ -27,16 +27,19 @@ inline void spin_for(std::chrono::microseconds span) {
 }
 
 // How long a cache line takes to pass from this core to another and back, in nanoseconds:
-// one thread of its own and this one hand a word to each other `trips` times; the median of
-// five such batches. On the 2-core virtual machines here it was 128-132 ns in quiet hours and
-// 440-490 ns in the spells when every two-thread stage that shares data between its threads
-// ran up to twice as long, while work on each core's own data ran as fast as ever (issue 13,
-// fifty-first part). The scaling report records it beside every two-thread ladder run, so
-// that a pair run in such a spell can be told from the code's own scaling.
-inline double line_round_trip_ns(int trips = 2000) {
+// one thread of its own and this one hand a word to each other `trips` times; the least of
+// nine such batches, a millisecond apart (a core kept busy for a few milliseconds, as by the
+// kernel writing out the files the last command left, slows some batches, not the link). On
+// the 2-core virtual machines here it was 71-160 ns in quiet hours and 440-490 ns in the
+// spells when every two-thread stage that shares data between its threads ran up to twice as
+// long, while work on each core's own data ran as fast as ever (issue 13, fifty-first part).
+// The scaling report records it beside every two-thread ladder run, so that a pair run in
+// such a spell can be told from the code's own scaling.
+inline double line_round_trip_ns(int trips = 1000) {
   alignas(64) std::atomic<int> word{0};
-  std::vector<double> batches;
-  for (int batch = 0; batch < 5; ++batch) {
+  double least = 0.0;
+  for (int batch = 0; batch < 9; ++batch) {
+    if (batch > 0) std::this_thread::sleep_for(std::chrono::milliseconds(1));
     word.store(0);
     std::thread other([&] {
       for (int i = 0; i < trips; ++i) {
@@ -53,10 +56,10 @@ inline double line_round_trip_ns(int trips = 2000) {
     }
     const auto end = std::chrono::steady_clock::now();
     other.join();
-    batches.push_back(std::chrono::duration<double, std::nano>(end - start).count() / trips);
+    const double trip = std::chrono::duration<double, std::nano>(end - start).count() / trips;
+    least = batch == 0 ? trip : std::min(least, trip);
   }
-  std::nth_element(batches.begin(), batches.begin() + 2, batches.end());
-  return batches[2];
+  return least;
 }
 
 // decompose on `mesh` (its BVH built inside the timing) at tolerance_rel × diagonal.
