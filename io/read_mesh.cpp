@@ -162,7 +162,7 @@ struct RawMesh {
   std::vector<int> triangles;
   // Set by a parser whose triangles use every point, each as it is read (binary STL): each
   // point's weld key (weld_key), and the points' box. repair then passes over them no more.
-  Buffer<KeyedIndex> weld_keys;
+  Buffer<NarrowKeyedIndex> weld_keys;
   std::optional<std::array<Vec3, 2>> box;
 };
 
@@ -174,7 +174,7 @@ struct RawMesh {
 int weld_key_bits(std::size_t points) { return points < (std::size_t{1} << 18) ? 22 : 32; }
 
 // Point p's weld key, its coordinates' −0 made +0 first (equal coordinates compare equal).
-std::uint64_t weld_key(double* p, int bits) {
+std::uint32_t weld_key(double* p, int bits) {
   for (int k = 0; k < 3; ++k) p[k] += 0.0;
   return weld_hash(p) >> (32 - bits);
 }
@@ -304,7 +304,7 @@ RawMesh parse_stl_binary(const std::string& path, std::string_view data) {
   raw.xyz.resize(9 * expected);
   raw.triangles.resize(3 * expected);
   const int bits = weld_key_bits(3 * expected);
-  raw.weld_keys = Buffer<KeyedIndex>(3 * expected);
+  raw.weld_keys = Buffer<NarrowKeyedIndex>(3 * expected);
   const std::size_t pieces = piece_count(expected);
   std::vector<std::array<Vec3, 2>> boxes(pieces);  // each piece's, of its finite points
   std::atomic<bool> invalid{false};
@@ -969,7 +969,7 @@ int drop_duplicate_faces(std::span<int> triangles) {
   const std::size_t nf = triangles.size() / 3;
   // Faces sorted by a 32-bit hash of their sorted vertices, then by index (as the points are).
   Buffer<std::array<int, 3>> vertices(nf);
-  Buffer<KeyedIndex> order(nf);
+  Buffer<NarrowKeyedIndex> order(nf);
   Buffer<char> duplicate(nf);
   parallel_for(0, nf, [&](std::size_t begin, std::size_t end) {
     std::fill(duplicate.data() + begin, duplicate.data() + end, 0);
@@ -981,20 +981,21 @@ int drop_duplicate_faces(std::span<int> triangles) {
       const int lo = std::min(t[0], t[1]), hi = std::max(t[0], t[1]);
       std::array<int, 3>& v = vertices[f];
       v = {std::min(lo, t[2]), std::max(lo, std::min(hi, t[2])), std::max(hi, t[2])};
-      order[f] = {hash_words(static_cast<std::uint32_t>(v[0]), static_cast<std::uint32_t>(v[1]),
-                             static_cast<std::uint32_t>(v[2])) >> 32,
-                  static_cast<std::int32_t>(f)};
+      const std::uint64_t hash = hash_words(static_cast<std::uint32_t>(v[0]),
+                                            static_cast<std::uint32_t>(v[1]),
+                                            static_cast<std::uint32_t>(v[2]));
+      order[f] = {static_cast<std::uint32_t>(hash >> 32), static_cast<std::int32_t>(f)};
     }
   }, kPiece);
   radix_sort_by_key(order, 32);
-  const auto run = [&](KeyedIndex* first, KeyedIndex* last) {
+  const auto run = [&](NarrowKeyedIndex* first, NarrowKeyedIndex* last) {
     if (last - first == 1) return 0;
-    std::sort(first, last, [&](const KeyedIndex& a, const KeyedIndex& b) {
+    std::sort(first, last, [&](const NarrowKeyedIndex& a, const NarrowKeyedIndex& b) {
       const std::array<int, 3>&x = vertices[a.index], &y = vertices[b.index];
       return x != y ? x < y : a.index < b.index;
     });
     int copies = 0;
-    for (const KeyedIndex* k = first + 1; k < last; ++k)
+    for (const NarrowKeyedIndex* k = first + 1; k < last; ++k)
       if (vertices[k->index] == vertices[(k - 1)->index]) duplicate[k->index] = 1, ++copies;
     return copies;
   };
@@ -1104,9 +1105,9 @@ LoadedMesh repair(const std::string& path, RawMesh raw, std::string format,
   const auto coord = [&](int v) { return raw.xyz.data() + 3 * static_cast<std::size_t>(v); };
   // Points sorted by their weld key (weld_key_bits), then by index.
   const int weld_bits = weld_key_bits(static_cast<std::size_t>(nv));
-  Buffer<KeyedIndex> order = std::move(raw.weld_keys);
+  Buffer<NarrowKeyedIndex> order = std::move(raw.weld_keys);
   if (order.empty()) {
-    order = Buffer<KeyedIndex>(static_cast<std::size_t>(nv));
+    order = Buffer<NarrowKeyedIndex>(static_cast<std::size_t>(nv));
     parallel_for(0, static_cast<std::size_t>(nv), [&](std::size_t begin, std::size_t end) {
       for (std::size_t v = begin; v < end; ++v)
         order[v] = {weld_key(coord(static_cast<int>(v)), weld_bits), static_cast<std::int32_t>(v)};
@@ -1144,13 +1145,14 @@ LoadedMesh repair(const std::string& path, RawMesh raw, std::string format,
   const auto same_point = [&](int a, int b) {
     return std::equal(coord(a), coord(a) + 3, coord(b));
   };
-  const auto run = [&](KeyedIndex* first, KeyedIndex* last) {
-    const auto copy = [&](const KeyedIndex& k) { return same_point(k.index, first->index); };
+  const auto run = [&](NarrowKeyedIndex* first, NarrowKeyedIndex* last) {
+    const auto copy = [&](const NarrowKeyedIndex& k) { return same_point(k.index, first->index); };
     if (std::all_of(first + 1, last, copy)) {
-      for (const KeyedIndex* k = first; k < last; ++k) representative[k->index] = first->index;
+      for (const NarrowKeyedIndex* k = first; k < last; ++k)
+        representative[k->index] = first->index;
       return 1;
     }
-    std::sort(first, last, [&](const KeyedIndex& a, const KeyedIndex& b) {
+    std::sort(first, last, [&](const NarrowKeyedIndex& a, const NarrowKeyedIndex& b) {
       const double *p = coord(a.index), *q = coord(b.index);
       return p[0] != q[0]   ? p[0] < q[0]
              : p[1] != q[1] ? p[1] < q[1]
@@ -1158,7 +1160,7 @@ LoadedMesh repair(const std::string& path, RawMesh raw, std::string format,
                             : a.index < b.index;
     });
     int points = 0;
-    for (const KeyedIndex* k = first; k < last; ++k) {
+    for (const NarrowKeyedIndex* k = first; k < last; ++k) {
       const bool same = k > first && same_point(k->index, (k - 1)->index);
       points += same ? 0 : 1;
       representative[k->index] = same ? representative[(k - 1)->index] : k->index;

@@ -58,7 +58,9 @@ VecX vertex_areas(const Mesh& mesh) {
 
 double total_area(const Mesh& mesh) { return face_areas(mesh).sum(); }
 
-void radix_sort_by_key(std::span<KeyedIndex> items, int key_bits) {
+namespace {
+template <class Item>
+void radix_sort_items(std::span<Item> items, int key_bits) {
   constexpr int kDigitBits = 11;
   constexpr std::size_t kBuckets = std::size_t{1} << kDigitBits;
   constexpr std::size_t kChunk = 16384;  // below two of these, one chunk: a fork costs more
@@ -67,8 +69,8 @@ void radix_sort_by_key(std::span<KeyedIndex> items, int key_bits) {
   const auto threads = static_cast<std::size_t>(max_threads());
   const std::size_t chunks = std::clamp<std::size_t>(std::min(n / kChunk, threads), 1, 8);
   const auto bound = [&](std::size_t c) { return n * c / chunks; };
-  Buffer<KeyedIndex> spare(n);
-  std::span<KeyedIndex> from = items, to{spare.data(), n};
+  Buffer<Item> spare(n);
+  std::span<Item> from = items, to{spare.data(), n};
   // count[c][d]: chunk c's items with digit d; then where chunk c puts its next item of digit d.
   std::vector<std::size_t> count(chunks * kBuckets);
   for (int shift = 0; shift < key_bits; shift += kDigitBits) {
@@ -76,7 +78,7 @@ void radix_sort_by_key(std::span<KeyedIndex> items, int key_bits) {
     // Each loop's bounds and spans are locals: stored counts could alias captured ones.
     parallel_invoke_each(chunks, [&](std::size_t c) {
       std::size_t* h = &count[c * kBuckets];
-      const KeyedIndex *i = from.data() + bound(c), *end = from.data() + bound(c + 1);
+      const Item *i = from.data() + bound(c), *end = from.data() + bound(c + 1);
       for (; i < end; ++i) ++h[(i->key >> shift) & (kBuckets - 1)];
     });
     std::size_t running = 0;
@@ -90,8 +92,8 @@ void radix_sort_by_key(std::span<KeyedIndex> items, int key_bits) {
     if (one_digit) continue;
     parallel_invoke_each(chunks, [&](std::size_t c) {
       std::size_t* next = &count[c * kBuckets];
-      KeyedIndex* out = to.data();
-      const KeyedIndex *i = from.data() + bound(c), *end = from.data() + bound(c + 1);
+      Item* out = to.data();
+      const Item *i = from.data() + bound(c), *end = from.data() + bound(c + 1);
       for (; i < end; ++i) out[next[(i->key >> shift) & (kBuckets - 1)]++] = *i;
     });
     std::swap(from, to);
@@ -100,6 +102,16 @@ void radix_sort_by_key(std::span<KeyedIndex> items, int key_bits) {
     parallel_for(0, n, [&](std::size_t begin, std::size_t end) {
       std::copy(from.data() + begin, from.data() + end, items.data() + begin);
     }, kChunk);
+}
+}  // namespace
+
+void radix_sort_by_key(std::span<KeyedIndex> items, int key_bits) {
+  radix_sort_items(items, key_bits);
+}
+
+void radix_sort_by_key(std::span<NarrowKeyedIndex> items, int key_bits) {
+  assert(key_bits <= 32);
+  radix_sort_items(items, key_bits);
 }
 
 // Not a comparison sort: the slots are counted into buckets by their edge's lower vertex in

@@ -36,15 +36,20 @@ VecX face_areas(const Mesh& mesh);
 VecX vertex_areas(const Mesh& mesh);
 double total_area(const Mesh& mesh);
 // A key and the index it belongs to, ordered by both. Trivial: a buffer of them costs no
-// writes until the code that fills it does (see Buffer).
-struct KeyedIndex {
-  std::uint64_t key;
+// writes until the code that fills it does (see Buffer). NarrowKeyedIndex, with a key of at
+// most 32 bits, takes half the bytes: for sorts of 32-bit hashes (the weld's, the copies'),
+// whose passes then move half the memory.
+template <class Key>
+struct BasicKeyedIndex {
+  Key key;
   std::int32_t index;
-  friend bool operator<(const KeyedIndex& a, const KeyedIndex& b) {
+  friend bool operator<(const BasicKeyedIndex& a, const BasicKeyedIndex& b) {
     return a.key < b.key || (a.key == b.key && a.index < b.index);
   }
-  friend bool operator==(const KeyedIndex&, const KeyedIndex&) = default;
+  friend bool operator==(const BasicKeyedIndex&, const BasicKeyedIndex&) = default;
 };
+using KeyedIndex = BasicKeyedIndex<std::uint64_t>;
+using NarrowKeyedIndex = BasicKeyedIndex<std::uint32_t>;
 // Sorts by key, keeping the order of equal keys: items that arrive in index order leave in
 // KeyedIndex's order. Keys must be below 2^key_bits. Radix passes of 11 bits from the lowest
 // (a pass skipped where every key has the same digit), each on up to eight chunks side by side:
@@ -52,6 +57,7 @@ struct KeyedIndex {
 // sort mispredicts most of its branches on random keys. A stable sort's result is unique, so
 // it is the same whatever the thread count.
 void radix_sort_by_key(std::span<KeyedIndex> items, int key_bits);
+void radix_sort_by_key(std::span<NarrowKeyedIndex> items, int key_bits);  // key_bits ≤ 32
 // The key of edge (k, k + 1 mod 3) of face f: its vertex pair, the lower in the high 32 bits.
 inline std::uint64_t edge_key(const Mesh& mesh, int f, int k) {
   const auto u = static_cast<std::uint32_t>(mesh.F(f, k));

@@ -108,31 +108,39 @@ TEST(SortedEdgeSlots, EqualStdSortOfTheKeyedSlots) {
 }
 
 // Against std::stable_sort by key alone: random keys of several widths (an 11-bit pass, a
-// pass that is one digit throughout and skipped, all 64 bits), few keys or many, items in
-// index order or not, sizes around the chunk (16384 items), at 1 to 3 threads.
-TEST(RadixSortByKey, IsTheStableSortByKey) {
+// pass that is one digit throughout and skipped, all 64 bits; the weld's 22 and all 32 of a
+// narrow key), few keys or many, items in index order or not, sizes around the chunk (16384
+// items), at 1 to 3 threads.
+template <class Item>
+void expect_stable_sort_by_key(std::initializer_list<int> widths) {
   std::mt19937_64 rng(11);
-  for (const int bits : {1, 11, 12, 32, 33, 64})
+  for (const int bits : widths)
     for (const std::size_t n : std::vector<std::size_t>{0, 1, 100, 16384, 2 * 16384 + 5, 100000})
       for (const bool shuffled : {false, true}) {
-        std::vector<KeyedIndex> items(n);
+        std::vector<Item> items(n);
         for (std::size_t i = 0; i < n; ++i) {
           std::uint64_t key = bits == 64 ? rng() : rng() & ((std::uint64_t{1} << bits) - 1);
           if (bits == 33) key &= ~(std::uint64_t{0x7ff} << 11);  // the second digit: all zero
-          items[i] = {key, static_cast<std::int32_t>(i)};
+          items[i] = {static_cast<decltype(Item::key)>(key), static_cast<std::int32_t>(i)};
         }
         if (shuffled) std::shuffle(items.begin(), items.end(), rng);
-        std::vector<KeyedIndex> want = items;
+        std::vector<Item> want = items;
         std::stable_sort(want.begin(), want.end(),
-                         [](const KeyedIndex& a, const KeyedIndex& b) { return a.key < b.key; });
+                         [](const Item& a, const Item& b) { return a.key < b.key; });
         for (const int threads : {1, 2, 3}) {
           const ThreadLimit limit(threads);
-          std::vector<KeyedIndex> got = items;
+          std::vector<Item> got = items;
           radix_sort_by_key(got, bits);
           EXPECT_TRUE(got == want) << bits << " bits, " << n << " items, shuffled " << shuffled
-                                   << ", " << threads << " threads";
+                                   << ", " << threads << " threads, " << sizeof(Item)
+                                   << "-byte items";
         }
       }
+}
+
+TEST(RadixSortByKey, IsTheStableSortByKey) {
+  expect_stable_sort_by_key<KeyedIndex>({1, 11, 12, 32, 33, 64});
+  expect_stable_sort_by_key<NarrowKeyedIndex>({1, 11, 12, 22, 32});
 }
 
 }  // namespace
