@@ -1171,7 +1171,8 @@ LoadedMesh repair(const std::string& path, RawMesh raw, std::string format,
   report.welded_vertices = nv - unique;
 
   // Drop degenerate faces: repeated (welded) index or area ≤ 1e-14 · diagonal² (the box of
-  // the points the triangles use, found beside the weld's sort above).
+  // the points the triangles use: a binary STL's from its parse, another's found beside the
+  // weld's sort above).
   const double area_floor = kDegenerateArea * (hi - lo).squaredNorm();
   const auto welded = [&](int t) {
     const int* corner = raw.triangles.data() + 3 * static_cast<std::size_t>(t);

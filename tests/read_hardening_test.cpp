@@ -323,7 +323,7 @@ TEST_F(ReadHardening, CopiesAreFoundOnEveryKindOfEdge) {
   ASSERT_EQ(clean.mesh.face_count(), 4);
   EXPECT_EQ(clean.report.duplicate_faces, 0);
   EXPECT_EQ(clean.report.non_manifold_edges, 1);
-  for (const std::string& copy : {"f 3 2 1\n", "f 4 1 3\n", "f 5 3 1\n", "f 3 6 2\n"}) {
+  for (const std::string copy : {"f 3 2 1\n", "f 4 1 3\n", "f 5 3 1\n", "f 3 6 2\n"}) {
     SCOPED_TRACE(copy);
     for (const std::string& file : {points + faces + copy, points + copy + faces}) {
       const LoadedMesh read = read_mesh_bytes("copy.obj", file);
