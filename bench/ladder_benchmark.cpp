@@ -41,6 +41,12 @@
 //              process's peak as its own (Linux counts the memory of the process a spawn
 //              starts from until the exec; gigabytes here, with the large rungs built).
 //              Without /usr/bin/time the command is timed all the same, without them.
+//              At one thread the process runs on one core (its affinity), as the two-thread
+//              run runs on two: the command opens its CAD module on a thread of its own,
+//              which, left free, takes the idle core at `--threads 1` and a share of the two
+//              at `--threads 2`, so that from one thread to two the efficiency would count
+//              the opening's 20-odd ms against the second core. Counter unpinned_s: the same
+//              one-thread command run right after, on every core, as a user runs it.
 // The lines, query points, fit starts and decompose tolerance depend on the part, not on the
 // rung, so rungs of a part differ only in the mesh.
 #include "bench/ladder.h"
@@ -49,10 +55,12 @@
 #include <nlohmann/json.hpp>
 
 #include <fcntl.h>
+#include <sched.h>
 #include <spawn.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
+#include <chrono>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -441,6 +449,32 @@ void bench_read(benchmark::State& state, Rung r, int threads) {
 
 constexpr const char* kGnuTime = "/usr/bin/time";
 
+// While alive, the calling thread (and the processes it starts, which inherit its affinity)
+// runs only on the first core it may run on; the affinity it had is restored after.
+class OneCore {
+ public:
+  OneCore() {
+    if (sched_getaffinity(0, sizeof before_, &before_) != 0) return;
+    for (int cpu = 0; cpu < CPU_SETSIZE; ++cpu)
+      if (CPU_ISSET(cpu, &before_)) {
+        cpu_set_t one;
+        CPU_ZERO(&one);
+        CPU_SET(cpu, &one);
+        pinned_ = sched_setaffinity(0, sizeof one, &one) == 0;
+        return;
+      }
+  }
+  ~OneCore() {
+    if (pinned_) sched_setaffinity(0, sizeof before_, &before_);
+  }
+  OneCore(const OneCore&) = delete;
+  OneCore& operator=(const OneCore&) = delete;
+
+ private:
+  cpu_set_t before_{};
+  bool pinned_ = false;
+};
+
 void bench_command(benchmark::State& state, Rung r, int threads) {
   const PartData& p = part_data(r.part);
   const std::filesystem::path input = command_input(r);
@@ -472,17 +506,26 @@ void bench_command(benchmark::State& state, Rung r, int threads) {
   posix_spawn_file_actions_init(&quiet);
   posix_spawn_file_actions_addopen(&quiet, 1, "/dev/null", O_WRONLY, 0);
   posix_spawn_file_actions_addopen(&quiet, 2, "/dev/null", O_WRONLY, 0);
-  double faults = 0, peak_kb = 0, decompose_s = 0;
-  for (auto _ : state) {
+  // Runs the command to its end; false (the state told why) if it could not start or failed.
+  const auto run = [&] {
     pid_t pid = 0;
     if (posix_spawn(&pid, argv[0], &quiet, nullptr, argv.data(), environ) != 0) {
       state.SkipWithError((std::string("cannot start ") + argv[0]).c_str());
-      break;
+      return false;
     }
     int status = 0;
     if (waitpid(pid, &status, 0) != pid || !WIFEXITED(status) || WEXITSTATUS(status) != 0) {
       state.SkipWithError(("flank decompose " + input.string() + " failed").c_str());
-      break;
+      return false;
+    }
+    return true;
+  };
+  double faults = 0, peak_kb = 0, decompose_s = 0, unpinned_s = 0;
+  for (auto _ : state) {
+    {
+      std::optional<OneCore> one_core;
+      if (threads == 1) one_core.emplace();
+      if (!run()) break;
     }
     state.PauseTiming();
     if (measured) {
@@ -502,12 +545,18 @@ void bench_command(benchmark::State& state, Rung r, int threads) {
       state.SkipWithError(("no decompose time in " + (out / "patches.json").string() + ": " + e.what()).c_str());
       break;
     }
+    if (threads == 1) {
+      const auto start = std::chrono::steady_clock::now();
+      if (!run()) break;
+      unpinned_s += std::chrono::duration<double>(std::chrono::steady_clock::now() - start).count();
+    }
     state.ResumeTiming();
   }
   posix_spawn_file_actions_destroy(&quiet);
   const auto n = static_cast<double>(std::max<benchmark::IterationCount>(1, state.iterations()));
   state.counters["triangles"] = static_cast<double>(rung_data(r).mesh.face_count());
   state.counters["decompose_s"] = decompose_s / n;
+  if (threads == 1) state.counters["unpinned_s"] = unpinned_s / n;
   if (measured) {
     state.counters["page_faults"] = faults / n;
     state.counters["peak_mb"] = peak_kb / 1024.0;

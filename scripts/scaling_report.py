@@ -547,6 +547,7 @@ def command_rows(lad):
             "outside_decompose_s": None if own is None else c.real_s - own,
             "decompose_warm_s": None if d is None else d.real_s,
             "page_faults": _counter(c, "page_faults"), "peak_mb": _counter(c, "peak_mb"),
+            "unpinned_s": _counter(c, "unpinned_s"),
         })
     return rows
 
@@ -967,15 +968,20 @@ def build_markdown(title, run_path, context, benches, base_path, base, lad):
                 "decompose, writing every output. Its decompose is the time the process reports "
                 "in patches.json; the warm loop is this run's decompose stage on the same mesh, "
                 "repeated in one long process. The difference between those two is what a cold "
-                "process pays (threads created, pages faulted in afresh, and, at two threads, "
-                "the core that the thread opening the CAD module, Open CASCADE, takes meanwhile).", ""]
+                "process pays (threads created, pages faulted in afresh, and the share of a "
+                "core that the thread opening the CAD module, Open CASCADE, takes meanwhile). "
+                "At one thread the command runs on one core, as at two it runs on two, so that "
+                "its efficiency compares one core's time with two cores': left free, the "
+                "one-thread command opens the CAD module on the idle core. The last column is "
+                "that run, right after, on every core, as a user runs `--threads 1`.", ""]
         out.append(md_table(
             ["part", "tri_k", "threads", "command", "its decompose", "the rest",
-             "decompose, warm loop", "page faults", "peak memory"],
+             "decompose, warm loop", "page faults", "peak memory", "1 thread, every core"],
             [[r["part"], r["tri_k"], r["threads"], human_time(r["command_s"]),
               human_time(r["decompose_in_command_s"]), human_time(r["outside_decompose_s"]),
               human_time(r["decompose_warm_s"]), sig3(r["page_faults"]),
-              "n/a" if r["peak_mb"] is None else f"{r['peak_mb']:.0f} MB"] for r in commands]))
+              "n/a" if r["peak_mb"] is None else f"{r['peak_mb']:.0f} MB",
+              "" if r["threads"] != 1 else human_time(r["unpinned_s"])] for r in commands]))
 
     out += ["", "## Time per stage", ""]
     header = ["benchmark", "median", "cv %"]

@@ -88,10 +88,14 @@ def ladder_run(parts=("cone", "blade"), sizes=(1, 4, 16), tolerance=1e-3, kinds=
                     "candidates_s": 0.3 * tri_k ** 0.5, "fit_s": 0.5 * tri_k ** 0.5,
                     "cover_s": 0.1, "patches": 1.0, "coverage": 0.99, "lines_scored": 5e4,
                     "tolerance_rel": tolerance, "cutter_kinds": float(kinds)})
-                # The same decompose as its own process: 20% slower inside, and 150 ms around.
-                out["Ladder/command" + base] = (1.2 * 1000.0 * tri_k ** 0.5 * f + 150.0, 0.02, {
-                    "triangles": tri, "decompose_s": 1.2 * tri_k ** 0.5 * f,
-                    "page_faults": 2000.0, "peak_mb": 90.0, "tolerance_rel": tolerance})
+                # The same decompose as its own process: 20% slower inside, and 150 ms around;
+                # at one thread on one core, and 20 ms faster on every core.
+                command = {"triangles": tri, "decompose_s": 1.2 * tri_k ** 0.5 * f,
+                           "page_faults": 2000.0, "peak_mb": 90.0, "tolerance_rel": tolerance}
+                if t == 1:
+                    command["unpinned_s"] = 1.2 * tri_k ** 0.5 + 0.130
+                out["Ladder/command" + base] = (1.2 * 1000.0 * tri_k ** 0.5 * f + 150.0, 0.02,
+                                                command)
     return out
 
 
@@ -558,6 +562,8 @@ class ScalingReportTest(unittest.TestCase):
         self.assertAlmostEqual(c["decompose_in_command_s"], 1.2 * 16 ** 0.5 * 0.55)
         self.assertAlmostEqual(c["outside_decompose_s"], 0.150)
         self.assertEqual((c["page_faults"], c["peak_mb"]), (2000.0, 90.0))
+        self.assertIsNone(c["unpinned_s"])
+        self.assertAlmostEqual(cmd[("cone", 16, 1)]["unpinned_s"], 1.2 * 16 ** 0.5 + 0.130)
         self.assertAlmostEqual(par["Ladder/command/blade/tri_k:1"]["t1_s"], 1.2 + 0.150)
         # A run without the stage (a baseline from before it) has no rows for it.
         older = {k: v for k, v in ladder_run().items() if not k.startswith("Ladder/command/")}
@@ -592,7 +598,9 @@ class ScalingReportTest(unittest.TestCase):
         for section in ("scoring_vs_queries", "parallel", "fit_vs_unavoidable", "command", "slopes"):
             self.assertTrue(summary[section], section)
         self.assertIn("### The whole command, cold", md)
-        self.assertIn("| cone | 16 | 2 | 2.79 s | 2.64 s | 150 ms | 2.20 s | 2000 | 90 MB |", md)
+        self.assertIn("| cone | 16 | 2 | 2.79 s | 2.64 s | 150 ms | 2.20 s | 2000 | 90 MB |  |", md)
+        self.assertIn(
+            "| cone | 16 | 1 | 4.95 s | 4.80 s | 150 ms | 4.00 s | 2000 | 90 MB | 4.93 s |", md)
 
     @unittest.skipUnless(HAVE_MATPLOTLIB, "matplotlib is not installed")
     def test_report_with_the_real_faces(self):
