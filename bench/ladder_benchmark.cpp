@@ -450,7 +450,8 @@ void bench_read(benchmark::State& state, Rung r, int threads) {
 constexpr const char* kGnuTime = "/usr/bin/time";
 
 // While alive, the calling thread (and the processes it starts, which inherit its affinity)
-// runs only on the first core it may run on; the affinity it had is restored after.
+// runs only on the first core it may run on; the affinity it had is restored after. Where
+// the affinity cannot be read or set, nothing changes.
 class OneCore {
  public:
   OneCore() {
