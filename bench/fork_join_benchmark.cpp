@@ -13,12 +13,16 @@
 // work to reach an efficiency of 0.9.
 //
 // BM_CrewSteps, below: what a crew's short steps cost, its helper woken once for 20 of them.
+// BM_StepChain, last: how far a chain of a read's kind of steps scales here, whatever the code.
 #include <benchmark/benchmark.h>
 
+#include <algorithm>
 #include <array>
 #include <chrono>
 #include <cstdint>
 #include <functional>
+#include <numeric>
+#include <vector>
 
 #include "bench/runs.h"
 #include "kernels/parallel.h"
@@ -95,6 +99,62 @@ BENCHMARK(BM_CrewSteps)
     ->ArgNames({"chunks", "iterations", "threads"})
     ->ArgsProduct({{40}, {100, 300, 1000}, {1, 2}})
     ->ArgsProduct({{200}, {200}, {1, 2}})
+    ->UseRealTime()
+    ->Unit(benchmark::kMicrosecond);
+
+// BM_StepChain: a chain of steps of a mesh read's kind, with nothing of the read in it. 24
+// steps, each a parallel loop (parallel_invoke_each) over pieces of 6144 items (a read's
+// pieces of 2048 faces) of an array of `items` doubles, that reads the array the step before
+// wrote and writes the other. `gather` 0: item i reads item i (a parse, a copy: each piece
+// reads what the same piece wrote, on whichever thread ran it); 1: item i reads item
+// (i · k) mod n, k coprime with n (a weld's or an edge's lookups: every piece reads what
+// every other wrote). No shared counter, no serial work between the steps, pieces of equal
+// work: what two threads take beyond half of one's time is the machine's, not a code's. The
+// scaling report prints its efficiency beside the stages' as a yardstick.
+//
+// On 2026-12-01, six runs whose two-thread runs saw a round trip of 80-116 ns, efficiency
+// (1 / 2 threads): 73,728 items (a 24k-face read's points) streaming 0.85-0.92 (234-257 /
+// 137-146 µs), gathering 0.77-0.79 (934-999 / 607-633 µs); 294,912 items streaming 0.91-1.01,
+// gathering 0.88-0.95. Pieces of 1536 items instead: the 73,728 items' gathering 0.80-0.81,
+// slower at both thread counts. Two pinned threads, a spin barrier between the steps (a
+// throwaway program), gathering at random over the whole array or each only from its own half
+// (no data passing between the cores): 0.76-0.79 and 0.85-0.89, with the same two-thread time
+// (561-596 and 568-582 µs; the own halves' one-thread run was the slower). Here two threads'
+// random reads do not run twice as fast as one's, whether or not they share the data.
+void BM_StepChain(benchmark::State& state) {
+  const auto items = static_cast<std::size_t>(state.range(0));
+  const bool gather = state.range(1) != 0;
+  const int threads = static_cast<int>(state.range(2));
+  const double round_trip = threads == 2 ? bench::line_round_trip_ns() : 0.0;
+  const ThreadLimit limit(threads);
+  constexpr int kSteps = 24;
+  constexpr std::size_t kPieceItems = 6144;
+  const std::size_t pieces = std::max<std::size_t>(1, items / kPieceItems);
+  std::vector<double> a(items, 1.0), b(items, 0.0);
+  std::size_t k = 40503 % items;  // a stride over about half the array, coprime with it
+  while (std::gcd(k, items) != 1) ++k;
+  std::vector<std::uint32_t> source(items);  // item i reads item (i · k) mod n
+  for (std::size_t i = 0; i < items; ++i) source[i] = static_cast<std::uint32_t>(i * k % items);
+  for (auto _ : state) {
+    for (int step = 0; step < kSteps; ++step) {
+      const double* from = step % 2 ? b.data() : a.data();
+      double* to = step % 2 ? a.data() : b.data();
+      parallel_invoke_each(pieces, [&](std::size_t c) {
+        const std::size_t begin = items * c / pieces, end = items * (c + 1) / pieces;
+        if (gather)
+          for (std::size_t i = begin; i < end; ++i) to[i] = from[source[i]] * 0.5 + 1.0;
+        else
+          for (std::size_t i = begin; i < end; ++i) to[i] = from[i] * 0.5 + 1.0;
+      });
+    }
+    benchmark::DoNotOptimize(a.data());
+  }
+  state.counters["steps"] = kSteps;
+  if (threads == 2) state.counters["line_rt_ns"] = round_trip;
+}
+BENCHMARK(BM_StepChain)
+    ->ArgNames({"items", "gather", "threads"})
+    ->ArgsProduct({{73728, 294912}, {0, 1}, {1, 2}})
     ->UseRealTime()
     ->Unit(benchmark::kMicrosecond);
 

@@ -38,6 +38,15 @@ LADDER_KEY = re.compile(
     r"^Ladder/(?P<stage>[^/]+)/(?P<part>[^/]+)/tri_k:(?P<tri_k>\d+)/threads:(?P<threads>\d+)$")
 # bench/fork_join_benchmark.cpp at two threads: one fork and join after an idle spell.
 FORK_JOIN_KEY = re.compile(r"^BM_ForkJoin/work_us:(?P<work>\d+)/idle_us:\d+/threads:2$")
+# bench/fork_join_benchmark.cpp's chain of parallel steps of a read's kind, as a parallel row.
+STEP_CHAIN_ROW = re.compile(r"^BM_StepChain/items:(?P<items>\d+)/gather:(?P<gather>[01])$")
+# Benchmarks of the machine, not of flank's code: in the efficiency table as yardsticks, never
+# counted as a stage that misses, and not compared with a baseline.
+YARDSTICKS = ("BM_ForkJoin/", "BM_StepChain/")
+
+
+def is_yardstick(name):
+    return name.startswith(YARDSTICKS)
 # Keys of a Google Benchmark entry that are not user counters.
 STANDARD_KEYS = {
     "name", "family_index", "per_family_instance_index", "run_name", "run_type",
@@ -489,12 +498,22 @@ def sub_stage_rows(base, b1, b2, cost):
     return rows
 
 
+def step_chain_rows(rows):
+    """The parallel_rows of BM_StepChain, each with its "items" and "gather" (bool), in the
+    order of the rows."""
+    chain = []
+    for r in rows:
+        if m := STEP_CHAIN_ROW.match(r["benchmark"]):
+            chain.append(dict(r, items=int(m["items"]), gather=m["gather"] == "1"))
+    return chain
+
+
 def below_in_every_quiet_pair(rows, target=0.9):
     """The parallel_rows long enough to reach target (ceiling unknown or at least target; see
     below_in_every_pair) that have quiet pairs (parallel_rows), every one of them under it."""
     return [r["benchmark"] for r in rows
             if r["quiet_pairs"] and r["quiet_high"] < target
-            and not r["benchmark"].startswith("BM_ForkJoin/")
+            and not is_yardstick(r["benchmark"])
             and (r["ceiling"] is None or r["ceiling"] >= target)]
 
 
@@ -505,7 +524,7 @@ def below_in_every_pair(rows, target=0.9):
     machine's fork and join), and the rest (ceiling unknown or at least target)."""
     short, slow = [], []
     for r in rows:
-        if r["high"] is None or r["high"] >= target or r["benchmark"].startswith("BM_ForkJoin/"):
+        if r["high"] is None or r["high"] >= target or is_yardstick(r["benchmark"]):
             continue
         (short if r["ceiling"] is not None and r["ceiling"] < target else slow).append(r["benchmark"])
     return short, slow
@@ -910,6 +929,22 @@ def build_markdown(title, run_path, context, benches, base_path, base, lad):
                 f"t1 ≥ {human_time(18 * cost)}. The ceiling column is that bound for each row; "
                 f"where the efficiency is under 0.9 and so is the ceiling, the stage is too short "
                 f"for this machine's thread wake-ups, whatever its code.", ""]
+    rows = parallel_rows(benches)
+    chain = step_chain_rows(rows)
+    if chain:
+        def said(r):
+            kind = "gathering" if r["gather"] else "streaming"
+            quiet = "" if r["quiet"] is None else f", {sig3(r['quiet'])} in its quiet pairs"
+            return f"{kind} over {r['items']:,} items {sig3(r['efficiency'])}{quiet}"
+        out += ["`BM_StepChain` rows are a yardstick of the machine, not of flank's code: 24 "
+                "parallel steps over an array of doubles, in pieces of equal work, with no "
+                "shared counter and no serial work between the steps, each reading what the step "
+                "before wrote on both threads, in order (streaming, as a parse or a copy) or at "
+                "random (gathering, as a read's weld and edges and a cover's sums do). In this "
+                f"run: {'; '.join(said(r) for r in chain)}. The gathering rows are what plain "
+                "steps of that kind reach on this machine: a stage made of them, with as little "
+                "work per item, can be expected to reach about as much. These rows are never "
+                "counted as a miss below.", ""]
     out += ["Rows `… · index`, `· seeds`, `· candidates`, `· fit+grow`, `· finish` and `· cover` "
             "under a decompose row are that decompose's own stages, from the seconds it records "
             "for each (its `patches.json`'s `timing_s`), paired by repetition in the same way; "
@@ -927,7 +962,6 @@ def build_markdown(title, run_path, context, benches, base_path, base, lad):
                 f"over the pairs whose two-thread run saw at most {QUIET_FACTOR:g} × the quiet "
                 f"level, and how many of the pairs those were; the efficiency column counts every "
                 f"pair.", ""]
-    rows = parallel_rows(benches)
     out.append(md_table(
         ["benchmark", "t (1 thread)", "t (2 threads)", "speed-up", "efficiency", "pairs' range",
          "ceiling", "pairs", "quiet"],

@@ -327,6 +327,38 @@ class ScalingReportTest(unittest.TestCase):
         self.assertIsNone(sr.fork_join_cost(benches))
         self.assertIsNone(sr.parallel_rows(benches)[0]["ceiling"])
 
+    def test_step_chain_is_a_yardstick_not_a_miss(self):
+        # The machine's chain of steps: streaming scales 0.95, gathering 0.85 (under 0.9);
+        # a read at 0.87 beside it. The chain's rows are shown and said, never called a miss.
+        runs = {}
+        for items, gather, t1 in ((73728, 0, 0.24), (73728, 1, 1.0)):
+            eff = 0.95 if gather == 0 else 0.85
+            base = f"BM_StepChain/items:{items}/gather:{gather}"
+            runs[base + "/threads:1"] = (t1, 0.01, {"steps": 24})
+            runs[base + "/threads:2"] = (t1 / (2 * eff), 0.01, {"steps": 24})
+        runs["Ladder/read/hecc_a/tri_k:24/threads:1"] = (1.5, 0.01, {"triangles": 24000})
+        runs["Ladder/read/hecc_a/tri_k:24/threads:2"] = (1.5 / (2 * 0.87), 0.01,
+                                                         {"triangles": 24000})
+        _, benches = sr.load_run(self.write("chain.json", gb_json(runs)))
+        rows = sr.parallel_rows(benches)
+        chain = sr.step_chain_rows(rows)
+        self.assertEqual([(r["items"], r["gather"]) for r in chain],
+                         [(73728, False), (73728, True)])
+        self.assertAlmostEqual(chain[1]["efficiency"], 0.85)
+        for r in rows:  # every pair under 0.9: only the read counts as a miss
+            r["low"], r["high"] = r["efficiency"], r["efficiency"]
+        self.assertEqual(sr.below_in_every_pair(rows)[1], ["Ladder/read/hecc_a/tri_k:24"])
+        md = sr.build_markdown("t", "run.json", {}, benches, None, None, sr.ladder(benches))
+        self.assertIn("In this run: streaming over 73,728 items 0.950; gathering over 73,728 "
+                      "items 0.850.", md)
+        self.assertIn("| `BM_StepChain/items:73728/gather:1` |", md)
+        # Without the chain in the run, nothing is said of it.
+        for key in list(benches):
+            if key.startswith("BM_StepChain/"):
+                del benches[key]
+        md = sr.build_markdown("t", "run.json", {}, benches, None, None, sr.ladder(benches))
+        self.assertNotIn("BM_StepChain", md)
+
     def test_merge_bad_input(self):
         good = self.write("good.json", self.iteration_run(10.0, 100.0))
         bad = self.write("bad.json", "{ truncated")
