@@ -131,7 +131,7 @@ void BM_StepChain(benchmark::State& state) {
   constexpr std::size_t kPieceItems = 6144;
   const std::size_t pieces = std::max<std::size_t>(1, items / kPieceItems);
   std::vector<double> a(items, 1.0), b(items, 0.0);
-  std::size_t k = 40503 % items;  // a stride over about half the array, coprime with it
+  std::size_t k = 40503 % items;  // a stride of some 40k items (320 KB), coprime with n
   while (std::gcd(k, items) != 1) ++k;
   std::vector<std::uint32_t> source(items);  // item i reads item (i · k) mod n
   for (std::size_t i = 0; i < items; ++i) source[i] = static_cast<std::uint32_t>(i * k % items);

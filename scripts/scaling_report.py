@@ -43,10 +43,6 @@ STEP_CHAIN_ROW = re.compile(r"^BM_StepChain/items:(?P<items>\d+)/gather:(?P<gath
 # Benchmarks of the machine, not of flank's code: in the efficiency table as yardsticks, never
 # counted as a stage that misses, and not compared with a baseline.
 YARDSTICKS = ("BM_ForkJoin/", "BM_StepChain/")
-
-
-def is_yardstick(name):
-    return name.startswith(YARDSTICKS)
 # Keys of a Google Benchmark entry that are not user counters.
 STANDARD_KEYS = {
     "name", "family_index", "per_family_instance_index", "run_name", "run_type",
@@ -496,6 +492,11 @@ def sub_stage_rows(base, b1, b2, cost):
         row["stage"] = f"decompose: {label}"
         rows.append(row)
     return rows
+
+
+def is_yardstick(name):
+    """True for a benchmark of the machine (YARDSTICKS), not of flank's code."""
+    return name.startswith(YARDSTICKS)
 
 
 def step_chain_rows(rows):
