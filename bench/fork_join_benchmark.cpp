@@ -117,10 +117,10 @@ BENCHMARK(BM_CrewSteps)
 // 137-146 µs), gathering 0.77-0.79 (934-999 / 607-633 µs); 294,912 items streaming 0.91-1.01,
 // gathering 0.88-0.95. Pieces of 1536 items instead: the 73,728 items' gathering 0.80-0.81,
 // slower at both thread counts. Two pinned threads, a spin barrier between the steps (a
-// throwaway program), gathering at random over the whole array or each only from its own half
-// (no data passing between the cores): 0.76-0.79 and 0.85-0.89, with the same two-thread time
-// (561-596 and 568-582 µs; the own halves' one-thread run was the slower). Here two threads'
-// random reads do not run twice as fast as one's, whether or not they share the data.
+// throwaway program), each gathering from its own half of the array or, with the same
+// pattern, from the other thread's half: 0.83-0.93 (median 0.875) and 0.79-0.86 (0.82), six
+// quiet runs; two-thread times 566-633 and 590-656 µs. Keeping each thread's random reads in
+// its own data gains some 4% here, and they still run short of twice one thread's speed.
 void BM_StepChain(benchmark::State& state) {
   const auto items = static_cast<std::size_t>(state.range(0));
   const bool gather = state.range(1) != 0;
